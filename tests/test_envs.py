@@ -1,0 +1,205 @@
+"""Physics of the five scenes: pushes, walls, hand range, door, gripper, determinism, vmap,
+and parity with C MuJoCo. Every rollout is T = 40 steps so each task compiles once."""
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import envs_mjx
+from envs_mjx import scenes
+from envs_mjx.reference import CReference
+from envs_mjx.rollout import random_actions, rollout
+from envs_mjx.scripts import SCRIPTS
+
+T = 40
+
+
+@functools.lru_cache(maxsize=None)
+def env_of(task):
+    return envs_mjx.make(task)
+
+
+@functools.lru_cache(maxsize=None)
+def rollout_fn(task):
+    env = env_of(task)
+    return jax.jit(lambda s, a: rollout(env, s, a))
+
+
+@functools.lru_cache(maxsize=None)
+def place_fn(task):
+    return jax.jit(env_of(task).place)
+
+
+@functools.lru_cache(maxsize=None)
+def reset_fn(task):
+    return jax.jit(env_of(task).reset)
+
+
+def run(task, state, actions):
+    return rollout_fn(task)(state, jnp.asarray(actions))
+
+
+# ----------------------------------------------------------------- bad input
+def test_unknown_task_names_the_value_and_the_choices():
+    with pytest.raises(ValueError, match=r"'puck_pull'.*puck_push.*hurdle_bottom.*pickup"):
+        envs_mjx.make("puck_pull")
+
+
+@pytest.mark.parametrize("bad, pattern", [
+    (np.zeros(3, np.float32), r"shape \(2,\), got \(3,\)"),
+    (np.zeros((1, 2), np.float32), r"shape \(2,\), got \(1, 2\)"),
+    (np.zeros(2, np.int32), r"float array, got dtype int32"),
+    (np.array([0.0, np.nan], np.float32), r"not finite"),
+])
+def test_bad_action_raises_before_stepping(bad, pattern):
+    env = env_of("puck_push")
+    state = place_fn("puck_push")(jnp.array([0.0, 0.5, 0.06]), jnp.array([0.0, 0.6]))
+    with pytest.raises(ValueError, match=pattern):
+        env.step(state, bad)
+
+
+def test_bad_action_shape_is_caught_under_jit_too():
+    env = env_of("door_open")
+    state = reset_fn("door_open")(jax.random.PRNGKey(0))
+    with pytest.raises(ValueError, match=r"'door_open'.*shape \(3,\), got \(2,\)"):
+        jax.jit(env.step)(state, jnp.zeros(2))
+
+
+# ----------------------------------------------------------------- physics outcomes
+def test_scripted_push_moves_puck_by_hand_travel():
+    env = env_of("puck_push")
+    s0 = reset_fn("puck_push")(jax.random.PRNGKey(0))
+    _, traj = run("puck_push", s0, SCRIPTS["puck_push"](T))
+    start, end = np.asarray(env.object_state(s0)), np.asarray(traj.obj[-1])
+    # The claw (radius 0.015) meets the puck (radius 0.04) 0.055 behind its centre and stops
+    # at the hand box edge y = 0.75: the puck must end 0.055 ahead of it, pushed straight.
+    expected = 0.75 + scenes.PUCK_RADIUS + 0.015
+    assert end[1] - start[1] == pytest.approx(expected - start[1], abs=0.006)
+    assert abs(end[0] - start[0]) < 0.005
+    # ... and it moved monotonically forward with the hand.
+    assert np.all(np.diff(np.asarray(traj.obj[:, 1])) > -1e-4)
+
+
+@pytest.mark.parametrize("task, puck, wall_x", [
+    # hurdle_bottom: the row y = 0.54 passes above the middle hurdle; the right wall at
+    # x = 0.15 stops the puck centre at 0.15 - radius.
+    ("hurdle_bottom", (-0.02, 0.54), 0.15 - scenes.PUCK_RADIUS),
+    # hurdle_top: the middle hurdle spans y 0.48..0.62 at x 0.04..0.06: the puck stops at
+    # x = 0.04 - radius.
+    ("hurdle_top", (-0.03, 0.56), 0.04 - scenes.PUCK_RADIUS),
+])
+def test_walls_stop_the_puck(task, puck, wall_x):
+    env = env_of(task)
+    hand0 = env.spec.hand_reset
+    s0 = place_fn(task)(jnp.array(hand0), jnp.array(puck))
+    # Go left of the puck, down to its row, then push +x all the way to the hand box edge.
+    rows = int(round((puck[1] - hand0[1]) / 0.02))
+    acts = np.concatenate([np.tile([-1.0, 0.0], (3, 1)), np.tile([0.0, 1.0], (rows, 1)),
+                           np.tile([1.0, 0.0], (T - 3 - rows, 1))]).astype(np.float32)
+    _, traj = run(task, s0, acts)
+    end = np.asarray(traj.obj[-1])
+    assert float(traj.mocap[-1, 0]) == pytest.approx(0.2, abs=1e-5)  # hand target kept going
+    assert end[0] - puck[0] > 0.02  # it was pushed ...
+    assert end[0] < wall_x + 0.003  # ... and stopped by the wall, not the hand box
+
+
+def test_hand_stays_in_its_range_and_state_stays_finite_on_long_random_rollouts():
+    for task in envs_mjx.TASK_NAMES:
+        env = env_of(task)
+        low, high = np.asarray(env.spec.hand_low), np.asarray(env.spec.hand_high)
+        state = reset_fn(task)(jax.random.PRNGKey(3))
+        for k in range(3 if task != "puck_push" else 6):  # 120-240 random steps
+            acts = random_actions(jax.random.PRNGKey(100 + k), T, env.action_size)
+            state, traj = run(task, state, acts)
+            mocap, hand = np.asarray(traj.mocap), np.asarray(traj.hand)
+            assert np.all(mocap >= low - 1e-6) and np.all(mocap <= high + 1e-6), task
+            # The hand lags its target through the soft weld and contacts: a few mm.
+            assert np.all(hand >= low - 0.008) and np.all(hand <= high + 0.008), task
+            leaves = jax.tree_util.tree_leaves(state.data)
+            assert all(bool(jnp.all(jnp.isfinite(x))) for x in leaves
+                       if jnp.issubdtype(x.dtype, jnp.floating)), task
+
+
+def test_pulling_the_hook_opens_the_door():
+    env = env_of("door_open")
+    s0 = reset_fn("door_open")(jax.random.PRNGKey(0))
+    _, traj = run("door_open", s0, SCRIPTS["door_open"](T))
+    angle = np.asarray(traj.obj[:, 0])
+    assert angle[5] < 0.02  # lowering the hook alone does not move the door
+    assert angle[-1] > 0.8  # pulling along the arc opens it past the largest goal angle
+    assert angle[-1] <= scenes.DOOR_MAX_ANGLE + 0.02  # hinge limit holds
+
+
+def test_door_is_reset_free():
+    env = env_of("door_open")
+    s0 = reset_fn("door_open")(jax.random.PRNGKey(0))
+    s1, _ = run("door_open", s0, SCRIPTS["door_open"](T))
+    s2 = env.reset_episode(s1, jax.random.PRNGKey(1))
+    assert int(s2.t) == 0
+    assert float(env.object_state(s2)[0]) == float(env.object_state(s1)[0]) > 0.5
+
+
+def test_gripper_lifts_the_object_only_when_closed():
+    env = env_of("pickup")
+    s0 = reset_fn("pickup")(jax.random.PRNGKey(0))
+    grasp = SCRIPTS["pickup"](T)
+    _, traj = run("pickup", s0, grasp)
+    z = np.asarray(traj.obj[:, 2])
+    assert z[-1] > 0.12  # lifted ~13 cm off the table with the hand
+    assert abs(float(traj.hand[-1, 2]) - scenes.GRASP_DROP - z[-1]) < 0.01
+    no_grip = grasp.copy()
+    no_grip[:, 2] = -1.0  # same motion, fingers kept open
+    _, traj_open = run("pickup", s0, no_grip)
+    assert float(traj_open.obj[-1, 2]) < scenes.CUBE_HALF + 0.005
+
+
+# ----------------------------------------------------------------- determinism / vmap
+def test_same_key_same_trajectory_and_different_key_differs():
+    env = env_of("hurdle_top")
+    k = jax.random.PRNGKey(7)
+    outs = []
+    for key in (k, k, jax.random.PRNGKey(8)):
+        s0 = reset_fn("hurdle_top")(key)
+        _, traj = run("hurdle_top", s0, random_actions(key, T, env.action_size))
+        outs.append(np.asarray(traj.obj))
+    np.testing.assert_array_equal(outs[0], outs[1])
+    assert not np.array_equal(outs[0], outs[2])
+
+
+def test_vmapped_envs_match_single_env():
+    task = "puck_push"
+    env = env_of(task)
+    keys = jax.random.split(jax.random.PRNGKey(11), 3)
+    acts = jax.vmap(lambda k: random_actions(k, T, env.action_size))(keys)
+    # Start every env next to the puck so that the random actions make contact.
+    hands = jnp.array([[0.0, 0.54, 0.06], [-0.05, 0.6, 0.06], [0.05, 0.66, 0.06]])
+    pucks = jnp.array([[0.0, 0.6], [0.0, 0.6], [0.0, 0.6]])
+    s0 = jax.vmap(place_fn(task))(hands, pucks)
+    _, batched = jax.jit(jax.vmap(lambda s, a: rollout(env, s, a)))(s0, acts)
+    for i in range(3):
+        si = jax.tree_util.tree_map(lambda x: x[i], s0)
+        _, single = run(task, si, acts[i])
+        np.testing.assert_allclose(np.asarray(batched.obj[i]), np.asarray(single.obj),
+                                   atol=2e-5)
+    assert float(jnp.max(jnp.abs(batched.obj[:, -1] - pucks))) > 0.01  # contact happened
+
+
+# ----------------------------------------------------------------- parity with C MuJoCo
+@pytest.mark.parametrize("task", envs_mjx.TASK_NAMES)
+def test_mjx_matches_c_mujoco_on_scripted_actions(task):
+    env = env_of(task)
+    s0 = reset_fn(task)(jax.random.PRNGKey(2))
+    acts = SCRIPTS[task](T)
+    _, traj = run(task, s0, acts)
+    ref = CReference(env, s0)
+    c_obj = []
+    for a in acts:
+        ref.step(a)
+        c_obj.append(ref.object_state())
+    c_obj = np.asarray(c_obj)
+    moved = np.abs(c_obj[-1] - np.asarray(env.object_state(s0))).max()
+    assert moved > 0.02, "the script must move the object for the comparison to mean much"
+    np.testing.assert_allclose(np.asarray(traj.obj), c_obj, atol=0.005)
