@@ -111,7 +111,10 @@ class Env:
                 raise ValueError(f"render {name} must be a positive int, got {v!r}")
         key = (int(width), int(height))
         if key not in self._renderers:
-            self._renderers[key] = Renderer(self.mj_model, self.camera, self.geom_label, *key)
+            # Its constant buffers are computed once, eagerly, even when first asked for
+            # inside a jit trace.
+            with jax.ensure_compile_time_eval():
+                self._renderers[key] = Renderer(self.mj_model, self.camera, self.geom_label, *key)
         return self._renderers[key]
 
     def check_action(self, action) -> None:

@@ -14,7 +14,11 @@ from envs_mjx.scenes import HAND_Z_PUSH
 Vec = tuple[float, ...]
 
 PUSH_CAMERA = Camera(lookat=(0.0, 0.85, 0.2), distance=0.3, elevation=-45.0, azimuth=270.0)
-DOOR_CAMERA = Camera(lookat=(-0.2, 0.55, 0.6), distance=0.25, elevation=-60.0, azimuth=360.0)
+# Door: multiworld's camera (lookat (-0.2, 0.55, 0.6), distance 0.25, elevation -60, azimuth
+# 360) looks along +x, i.e. along the plane of our closed door, which it would see edge-on.
+# We look diagonally from the robot's left-front instead, so that door face, handle, hook and
+# the hand's whole range are in view at every angle (docs/scenes.md shows both states).
+DOOR_CAMERA = Camera(lookat=(-0.05, 0.55, 0.15), distance=0.6, elevation=-45.0, azimuth=45.0)
 PICKUP_CAMERA = Camera(lookat=(0.0, 0.67, 0.1), distance=0.7, elevation=0.0, azimuth=180.0)
 
 
