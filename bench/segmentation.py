@@ -1,0 +1,170 @@
+"""Segmentation benchmarks. MOG2 part: jnp MOG2 vs cv2 MOG2 speed, and long-video parity.
+
+Writes bench/results/segmentation.json, keys "mog2" (frames/s at batch 1, 64, 1024 of
+independent 48x48x3 models, ratio against cv2 measured in the same run) and "mog2_parity"
+(per-frame mask agreement with cv2 over 2000+ frame videos). Other keys in the file are kept.
+
+    python bench/segmentation.py [--quick]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+import cv2  # noqa: E402
+import jax  # noqa: E402
+
+from roll_jax.segmentation import mog2  # noqa: E402
+from roll_jax.segmentation import mog2_parity as mp  # noqa: E402
+
+H = W = 48
+C = 3
+RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "segmentation.json")
+
+
+def _env_frames(video: np.ndarray, b: int, steps: int, start: int) -> np.ndarray:
+    """[steps, b, H, W, C]: env j sees the shared video shifted by 7 j frames."""
+    t = video.shape[0]
+    idx = (start + np.arange(steps)[:, None] + 7 * np.arange(b)[None, :]) % t
+    return video[idx]
+
+
+def bench_mog2(batches=(1, 64, 1024), warmup=30) -> dict:
+    video = mp.synthetic_video("mixed", t=300, h=H, w=W, c=C, seed=0)
+    out = {"frame_shape": [H, W, C], "history": 500, "learning_rate": -1.0,
+           "jax_backend": jax.default_backend(), "jax_device": str(jax.devices()[0]),
+           "cpu": platform.processor() or platform.machine(), "cpu_count": os.cpu_count(),
+           "cv2_threads": cv2.getNumThreads(), "cv2_version": cv2.__version__,
+           "jax_version": jax.__version__, "load_average_at_start": os.getloadavg()[0],
+           "note": "frames/s = model-frames per second; batch = independent models (one per "
+                   "env) stepped together by apply_batch; cv2 = a Python loop over as many "
+                   "cv2 subtractors; both on this machine's CPU in the same run",
+           "batches": {}}
+    for b in batches:
+        steps = max(4, min(200, 20000 // b))
+        warm = _env_frames(video, b, warmup, 0)
+        timed = _env_frames(video, b, steps, warmup)
+
+        # jnp: B independent models stepped together (apply_batch = vmap of the per-frame step).
+        model = mog2.init_batch(b, H, W, C)
+        for f in warm:
+            model, mask = mog2.apply_batch(model, jax.device_put(f))
+        jax.block_until_ready(mask)
+        timed_dev = jax.device_put(timed)
+        best = float("inf")
+        for _ in range(3):
+            m = model
+            t0 = time.perf_counter()
+            for i in range(steps):
+                m, mask = mog2.apply_batch(m, timed_dev[i])
+            jax.block_until_ready((m, mask))
+            best = min(best, time.perf_counter() - t0)
+        jax_fps = b * steps / best
+
+        # cv2: a Python loop over B subtractors, one apply each per step.
+        subs = [mp.cv2_subtractor(500, 16.0, True) for _ in range(b)]
+        for f in warm:
+            for j, s in enumerate(subs):
+                s.apply(f[j], learningRate=-1)
+        cv_steps = max(2, min(steps, 4000 // b))
+        t0 = time.perf_counter()
+        for i in range(cv_steps):
+            for j, s in enumerate(subs):
+                s.apply(timed[i, j], learningRate=-1)
+        cv2_fps = b * cv_steps / (time.perf_counter() - t0)
+        out["batches"][str(b)] = {"jax_fps": jax_fps, "cv2_fps": cv2_fps,
+                                  "ratio_jax_over_cv2": jax_fps / cv2_fps, "steps": steps}
+        print(f"mog2 batch {b:5d}: jax {jax_fps:10.0f} frames/s  cv2 {cv2_fps:10.0f} frames/s"
+              f"  ratio {jax_fps / cv2_fps:6.2f}", flush=True)
+
+    # One model over a video: apply_video (lax.scan) vs cv2 frame loop.
+    frames = jax.device_put(video)
+    model = mog2.init(H, W, C)
+    jax.block_until_ready(mog2.apply_video(model, frames))
+    t0 = time.perf_counter()
+    jax.block_until_ready(mog2.apply_video(model, frames))
+    scan_fps = len(video) / (time.perf_counter() - t0)
+    sub = mp.cv2_subtractor(500, 16.0, True)
+    t0 = time.perf_counter()
+    for f in video:
+        sub.apply(f, learningRate=-1)
+    cv_fps = len(video) / (time.perf_counter() - t0)
+    out["video_scan_batch1"] = {"jax_fps": scan_fps, "cv2_fps": cv_fps,
+                                "ratio_jax_over_cv2": scan_fps / cv_fps}
+    print(f"mog2 apply_video (scan, 1 model): jax {scan_fps:.0f} frames/s  cv2 {cv_fps:.0f}"
+          f"  ratio {scan_fps / cv_fps:.2f}", flush=True)
+
+    # Test-time use: a fitted model, many frames at lr 0 (foreground is vmapped over frames).
+    model, _ = mog2.apply_video(model, frames)
+    test = jax.device_put(np.concatenate([video] * 4))
+    jax.block_until_ready(mog2.foreground(model, test))
+    t0 = time.perf_counter()
+    jax.block_until_ready(mog2.foreground(model, test))
+    fg_fps = test.shape[0] / (time.perf_counter() - t0)
+    t0 = time.perf_counter()
+    for f in np.asarray(test):
+        sub.apply(f, learningRate=0)
+    cv_fps = test.shape[0] / (time.perf_counter() - t0)
+    out["foreground_lr0"] = {"jax_fps": fg_fps, "cv2_fps": cv_fps,
+                             "ratio_jax_over_cv2": fg_fps / cv_fps, "frames": int(test.shape[0])}
+    print(f"mog2 foreground (lr 0, {test.shape[0]} frames): jax {fg_fps:.0f} frames/s  cv2 "
+          f"{cv_fps:.0f}  ratio {fg_fps / cv_fps:.2f}", flush=True)
+    return out
+
+
+def parity_mog2(fit=2000, test=300, kinds=("mixed", "shadows", "flicker", "multimodal",
+                                           "late_object", "noise")) -> dict:
+    """ROLL's use on long videos: fit at lr -1 with history = fit frames, then lr 0."""
+    runs = []
+    lrs = np.where(np.arange(fit + test) < fit, -1.0, 0.0)
+    cases = [(k, 3) for k in kinds] + [("mixed", 1)]
+    for kind, c in cases:
+        frames = mp.synthetic_video(kind, t=fit + test, h=H, w=W, c=c, seed=11)
+        for shadows in (True, False):
+            r = mp.compare(frames, lrs, history=fit, detect_shadows=shadows)
+            runs.append({"kind": kind, "channels": c, "detect_shadows": shadows,
+                         "frames": fit + test, "min": r.min, "mean": r.mean,
+                         "min_fit": float(r.agreement[:fit].min()),
+                         "min_lr0": float(r.agreement[fit:].min()),
+                         "frames_not_exact": int((r.agreement < 1).sum()),
+                         "background_image_equal": r.background_equal})
+            print(f"parity {kind:12s} c={c} shadows={int(shadows)}: min {r.min:.6f} "
+                  f"mean {r.mean:.6f} background {r.background_equal:.6f}", flush=True)
+    return {"frame_shape": [H, W], "history": fit, "fit_frames_lr_-1": fit,
+            "test_frames_lr_0": test, "runs": runs,
+            "min": min(r["min"] for r in runs), "mean": float(np.mean([r["mean"] for r in runs]))}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="small batches and short videos")
+    args = ap.parse_args()
+    results = {}
+    if os.path.exists(RESULTS):
+        with open(RESULTS) as f:
+            results = json.load(f)
+    if args.quick:
+        results["mog2"] = bench_mog2(batches=(1, 64), warmup=5)
+        results["mog2_parity"] = parity_mog2(fit=300, test=50, kinds=("mixed",))
+    else:
+        results["mog2"] = bench_mog2()
+        results["mog2_parity"] = parity_mog2()
+    os.makedirs(os.path.dirname(RESULTS), exist_ok=True)
+    with open(RESULTS, "w") as f:
+        json.dump(results, f, indent=2)
+    p = results["mog2_parity"]
+    print(f"mog2 parity over {len(p['runs'])} videos: min per-frame agreement {p['min']:.6f}, "
+          f"mean {p['mean']:.6f}")
+    print("wrote", RESULTS)
+
+
+if __name__ == "__main__":
+    main()
