@@ -144,7 +144,9 @@ class Env:
         return {"push": (0, 1), "door": (0, 1, 2), "pickup": (1, 2)}[self.spec.kind]
 
     def _build(self, hand_pos, obj_q, finger_q=None):
-        """Data with the arm at IK(hand_pos), the object at obj_q, at rest, forward-computed."""
+        """Data with the arm at IK(hand_pos), the object at obj_q, at rest. Only kinematics
+        is computed (poses for rendering, hand and object readouts): `mjx.step` runs the full
+        forward pass itself, and skipping it here keeps reset cheap to compile."""
         d = self._data0
         qpos = d.qpos.at[:N_ARM_JOINTS].set(arm_ik(hand_pos))
         if obj_q is not None:
@@ -155,7 +157,7 @@ class Env:
             qpos = qpos.at[self._finger_qadr].set(f)
             ctrl = jnp.full_like(ctrl, f)
         d = d.replace(qpos=qpos, ctrl=ctrl, mocap_pos=jnp.asarray(hand_pos, jnp.float32)[None])
-        return mjx.forward(self.mjx_model, d)
+        return mjx.kinematics(self.mjx_model, d)
 
     def place(self, hand_pos, object_pos=None, finger_gap=None) -> EnvState:
         """A state at rest with the hand at `hand_pos` (3,) and the object at `object_pos`
