@@ -6,7 +6,7 @@ hidden group-3 / alpha-0 proxies), renders random poses with both renderers unde
 and compares per-pixel geom ids (MuJoCo: segmentation rendering) and 0/1/2 labels.
 Pixels on a geom-id edge in MuJoCo's image (any 4-neighbour differs) are reported separately.
 Then, if envs_mjx.make works, the same label comparison on each task scene (env.mj_model,
-env.camera, env.geom_label) with random arm joint angles around the initial pose.
+env.camera, env.geom_label) in states from env.reset with random arm joint offsets.
 
 Finally it times the JAX renderer (48x48, jit, 1 env and vmapped over 64 envs) on the test
 scene and the task scenes, next to MuJoCo's OSMesa renderer on the same scene as a reference
@@ -114,6 +114,25 @@ def mujoco_ids(mj_r, d, cam):
     return np.where((seg[..., 1] == int(mujoco.mjtObj.mjOBJ_GEOM)) & (seg[..., 0] >= 0), seg[..., 0], -1)
 
 
+def _task_states(env, d, rng):
+    """states(i) puts C MjData `d` in env.reset's state for key i, arm joints offset at random."""
+    m = env.mj_model
+    reset = jax.jit(env.reset)
+    arm = np.array([m.joint(j).qposadr[0] for j in range(m.njnt)
+                    if m.joint(j).name.startswith("j") and m.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE])
+
+    def states(i):
+        s = reset(jax.random.PRNGKey(i))
+        mujoco.mj_resetData(m, d)
+        d.qpos[:] = np.asarray(s.data.qpos)
+        d.mocap_pos[:] = np.asarray(s.data.mocap_pos)
+        d.mocap_quat[:] = np.asarray(s.data.mocap_quat)
+        if len(arm):
+            d.qpos[arm] += rng.uniform(-0.2, 0.2, len(arm))
+        mujoco.mj_forward(m, d)
+    return states
+
+
 def task_scenes(n_states: int = 20, size: int = 48):
     """Label agreement on the task scenes built by envs_mjx (skipped if they do not build)."""
     try:
@@ -129,15 +148,13 @@ def task_scenes(n_states: int = 20, size: int = 48):
         m = env.mj_model
         d = mujoco.MjData(m)
         label = np.asarray(env.geom_label)
+        states = _task_states(env, d, rng)
         render = jax.jit(Renderer(m, env.camera, label, width=size, height=size).render)
         mj_r = mujoco.Renderer(m, height=size, width=size)
         mj_r.enable_segmentation_rendering()
-        hinge = np.flatnonzero(m.jnt_type == mujoco.mjtJoint.mjJNT_HINGE)
         agree = total = 0
-        for _ in range(n_states):
-            mujoco.mj_resetData(m, d)
-            d.qpos[m.jnt_qposadr[hinge]] += rng.uniform(-0.3, 0.3, len(hinge))
-            mujoco.mj_forward(m, d)
+        for i in range(n_states):
+            states(i)
             ids = mujoco_ids(mj_r, d, env.camera)
             want = np.where(ids >= 0, label[np.maximum(ids, 0)], 0)
             _, lab = render(d.geom_xpos.astype(np.float32), d.geom_xmat.reshape(-1, 3, 3).astype(np.float32))
@@ -145,7 +162,7 @@ def task_scenes(n_states: int = 20, size: int = 48):
             total += want.size
         mj_r.close()
         out[name] = {"label_agreement": agree / total,
-                     "label_fractions_mujoco": np.bincount(want.ravel(), minlength=3).tolist()}
+                     "pixels_per_label_last_state": np.bincount(want.ravel(), minlength=3).tolist()}
         print(f"task {name:14s} {size}x{size} label agree {agree / total:.4f}", flush=True)
     return out
 
@@ -197,14 +214,9 @@ def speed(size: int = 48):
         import envs_mjx
         for name in envs_mjx.TASK_NAMES:
             env = envs_mjx.make(name)
-            me, de = env.mj_model, mujoco.MjData(env.mj_model)
-            hinge = np.flatnonzero(me.jnt_type == mujoco.mjtJoint.mjJNT_HINGE)
-
-            def states(i, me=me, de=de, hinge=hinge):
-                mujoco.mj_resetData(me, de)
-                de.qpos[me.jnt_qposadr[hinge]] += rng.uniform(-0.3, 0.3, len(hinge))
-                mujoco.mj_forward(me, de)
-            scenes.append((name, me, de, env.camera, np.asarray(env.geom_label), states))
+            de = mujoco.MjData(env.mj_model)
+            scenes.append((name, env.mj_model, de, env.camera, np.asarray(env.geom_label),
+                           _task_states(env, de, rng)))
     except Exception as e:
         print(f"task scenes skipped in timing: {e!r}")
     out = {"loadavg_before": os.getloadavg(), "cpu_count": os.cpu_count(), "size": size}
