@@ -84,10 +84,15 @@ def main() -> None:
                "machine": platform.processor() or platform.machine(),
                "cpu_count": os.cpu_count(), "jax": jax.__version__, "steps": args.steps,
                "tasks": {}}
+    if os.path.exists(args.out):  # keep other tasks' figures from an earlier (partial) run
+        with open(args.out) as f:
+            previous = json.load(f)
+        if previous.get("device") == results["device"]:
+            results["tasks"] = previous.get("tasks", {})
     for task in args.tasks:
         env = envs_mjx.make(task)
         c_sps = c_mujoco_throughput(env, 500)
-        row = {"c_mujoco_steps_per_s_1thread": c_sps, "mjx": {}}
+        row = {"c_mujoco_steps_per_s_1thread": c_sps, "n_envs": args.n, "mjx": {}}
         for n in args.n:
             for render in (False, True):
                 r = mjx_throughput(env, n, args.steps, render)

@@ -124,7 +124,6 @@ def test_hand_stays_in_its_range_and_state_stays_finite_on_long_random_rollouts(
 
 
 def test_pulling_the_hook_opens_the_door():
-    env = env_of("door_open")
     s0 = reset_fn("door_open")(jax.random.PRNGKey(0))
     _, traj = run("door_open", s0, SCRIPTS["door_open"](T))
     angle = np.asarray(traj.obj[:, 0])
@@ -143,7 +142,6 @@ def test_door_is_reset_free():
 
 
 def test_gripper_lifts_the_object_only_when_closed():
-    env = env_of("pickup")
     s0 = reset_fn("pickup")(jax.random.PRNGKey(0))
     grasp = SCRIPTS["pickup"](T)
     _, traj = run("pickup", s0, grasp)

@@ -2,7 +2,6 @@
 occlusion by the arm, empty scenes, other resolutions."""
 
 import functools
-import math
 
 import jax
 import jax.numpy as jnp
@@ -11,6 +10,7 @@ import pytest
 
 import envs_mjx
 from envs_mjx import LABEL_OBJECT, LABEL_ROBOT
+from pinhole import pinhole
 
 
 @functools.lru_cache(maxsize=None)
@@ -35,21 +35,6 @@ def view(task, hand, obj=None, empty=False, size=48):
     rgb, lab = placed_view(task, empty, size)(jnp.asarray(hand, jnp.float32),
                                               None if obj is None else jnp.asarray(obj, jnp.float32))
     return np.asarray(rgb), np.asarray(lab)
-
-
-def project(camera, point, h, w):
-    """Pixel (row, col) of a world point for a MuJoCo free camera (independent pinhole model)."""
-    el, az = math.radians(camera.elevation), math.radians(camera.azimuth)
-    f = np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
-    eye = np.asarray(camera.lookat) - camera.distance * f
-    right = np.cross(f, [0.0, 0.0, 1.0])
-    right /= np.linalg.norm(right)
-    up = np.cross(right, f)
-    p = np.asarray(point) - eye
-    scale = (h / 2) / math.tan(math.radians(camera.fovy) / 2)
-    col = w / 2 + scale * p.dot(right) / p.dot(f) - 0.5
-    row = h / 2 - scale * p.dot(up) / p.dot(f) - 0.5
-    return row, col
 
 
 def centroid(mask):
@@ -91,7 +76,7 @@ def test_object_centroid_follows_the_pinhole_projection(task, hand, positions, t
         point = np.array(list(pos) + [0.0] * (3 - len(pos))) + np.array(top_offset)
         if task == "puck_push":
             point[2] = top_offset[2]
-        row, col = project(env.camera, point, 48, 48)
+        row, col = pinhole(env.camera, point, 48, 48)
         r, c = centroid(mask)
         assert abs(r - row) < 1.5 and abs(c - col) < 1.5, (task, pos, (r, c), (row, col))
 
