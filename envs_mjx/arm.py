@@ -9,7 +9,6 @@ the real Sawyer's 7 joints follow a welded mocap body). The links are visual onl
 
 from __future__ import annotations
 
-import numpy as np
 import jax.numpy as jnp
 
 # Shoulder position (world) and link lengths (m). The base stands behind the table's
@@ -93,6 +92,3 @@ def arm_ik(hand_pos):
     q4 = -q0  # cancel the yaw so the hand keeps the mocap's orientation
     return jnp.stack([q0, q1, q2, q3, q4])
 
-
-def arm_ik_np(hand_pos) -> np.ndarray:
-    return np.asarray(arm_ik(np.asarray(hand_pos, np.float32)), np.float64)

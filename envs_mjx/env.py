@@ -225,14 +225,17 @@ class Env:
     def hand_pos(self, state: EnvState):
         return state.data.xpos[self._hand_body]
 
+    @property
+    def object_size(self) -> int:
+        """Length of `object_state`: puck xy, door angle, object xyz."""
+        return {"push": 2, "door": 1, "pickup": 3}[self.spec.kind]
+
     def object_state(self, state: EnvState):
         """float32[k]: puck xy (push), door angle (door), object xyz (pickup)."""
         if not self.with_object:
             raise ValueError(f"empty scene of task {self.name!r} has no object state")
-        q = state.data.qpos
         a = self.object_qadr
-        n = {"push": 2, "door": 1, "pickup": 3}[self.spec.kind]
-        return q[a:a + n]
+        return state.data.qpos[a:a + self.object_size]
 
     def goal_distance(self, state: EnvState, goal: EnvState):
         """The paper's metric: |angle - goal| (door) or the object's position error (m)."""

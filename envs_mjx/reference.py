@@ -38,9 +38,8 @@ class CReference:
             mujoco.mj_step(self.m, self.d)
 
     def object_state(self) -> np.ndarray:
-        k = {"push": 2, "door": 1, "pickup": 3}[self.env.spec.kind]
         adr = self.env.object_qadr
-        return self.d.qpos[adr:adr + k].copy()
+        return self.d.qpos[adr:adr + self.env.object_size].copy()
 
     def hand_pos(self) -> np.ndarray:
         return self.d.xpos[self.m.body("hand").id].copy()
