@@ -1,0 +1,39 @@
+"""Unknown-object segmentation config (paper appendix "Details on unknown object segmentation")."""
+
+from __future__ import annotations
+
+import dataclasses
+
+
+@dataclasses.dataclass(frozen=True)
+class SegmentationConfig:
+    # Background model: random actions in the object-free scene.
+    n_frames: int = 2000  # Appendix B.1: 2000 images (push tasks); 4000 for door/pickup (per-task file)
+    var_threshold: float = 16.0  # Appendix B.1: OpenCV's default ("automatically chosen")
+    detect_shadows: bool = True  # OpenCV default; shadows count as foreground in `segment`
+    n_mixtures: int = 5  # OpenCV default
+    n_envs: int = 8  # parallel empty-scene envs recording frames (our choice; frames are pooled)
+    # Robot U-Net.
+    unet_features: int = 64  # not in the paper: milesial Pytorch-UNet width (64..1024)
+    unet_epochs: int = 30  # Appendix B.1
+    unet_lr: float = 1e-3  # Appendix B.1
+    unet_momentum: float = 0.9  # Appendix B.1 (Nesterov)
+    unet_weight_decay: float = 5e-4  # Appendix B.1
+    unet_batch_size: int = 32  # not in the paper
+    distractor_prob: float = 0.5  # not in the paper: share of training images with a pasted distractor
+    robot_threshold: float = 0.5  # U-Net probability above which a pixel is robot (per task)
+    # Evaluation.
+    eval_states: int = 500  # issue 4: >= 500 random states with a visible object
+
+    def __post_init__(self):
+        for name in ("n_frames", "n_envs", "unet_features", "unet_epochs", "unet_batch_size",
+                     "eval_states"):
+            if getattr(self, name) <= 0:
+                raise ValueError(f"SegmentationConfig.{name} must be positive, got {getattr(self, name)}")
+        if not 0.0 < self.robot_threshold < 1.0:
+            raise ValueError(f"SegmentationConfig.robot_threshold must be in (0, 1), got {self.robot_threshold}")
+        if not 0.0 <= self.distractor_prob <= 1.0:
+            raise ValueError(f"SegmentationConfig.distractor_prob must be in [0, 1], got {self.distractor_prob}")
+
+
+SMOKE = dict(n_frames=300, n_envs=4, unet_features=8, unet_epochs=3, eval_states=64)
