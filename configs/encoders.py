@@ -1,0 +1,162 @@
+"""Scene-VAE, object-VAE and LSTM configs (paper appendix "Implementation details").
+
+Table 2 = "Task specific hyper-parameters", Table 3 = "Scene-VAE, object-VAE and LSTM training
+hyper-parameters for all tasks"; "Training schedules" and "Network Architectures" are the
+appendix subsections of those names. Values marked "reference code" come from the authors'
+release (github.com/yufeiwang63/ROLL), where the paper is silent.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+TASKS = ("puck_push", "hurdle_bottom", "hurdle_top", "door_open", "pickup")
+ALGOS = ("roll", "skewfit")
+
+# Table 2, one entry per task in TASKS order.
+_SCENE_BETA = dict(zip(TASKS, (20.0, 20.0, 20.0, 20.0, 30.0)))  # Table 2: beta for scene-VAE
+_SCENE_LATENT = {
+    "skewfit": dict(zip(TASKS, (4, 6, 6, 16, 16))),  # Table 2: latent size in Skew-Fit
+    "roll": dict(zip(TASKS, (6, 6, 6, 16, 16))),  # Table 2: latent size in ROLL
+}
+_VAE_MATCHING_COEF = dict(zip(TASKS, (400.0, 400.0, 800.0, 50.0, 50.0)))  # Table 2
+
+SCENE_FEATURE_DIM = 576  # "Network Architectures": final encoder feature vector of size 576
+OBJECT_FEATURE_DIM = 6  # "Network Architectures": object-VAE feature vector of size 6
+
+
+def _check_task(task: str) -> None:
+    if task not in TASKS:
+        raise ValueError(f"unknown task {task!r}; expected one of {TASKS}")
+
+
+def _check_positive(obj, names) -> None:
+    cls = type(obj).__name__
+    for name in names:
+        value = getattr(obj, name)
+        if not value > 0:
+            raise ValueError(f"{cls}.{name} must be positive, got {value!r}")
+
+
+@dataclasses.dataclass(frozen=True)
+class VAEConfig:
+    """One beta-VAE (scene or object): architecture, loss weights and pre-training schedule."""
+
+    latent_dim: int
+    beta: float
+    feature_dim: int  # 576 scene-VAE, 6 object-VAE ("Network Architectures")
+    matching_coef: float = 0.0  # Table 2 for the object-VAE; the scene-VAE has none
+    batch_size: int = 64  # Table 3: scene 64, object 128
+    lr: float = 1e-3  # "Training schedules": learning rate 1e-3 (both VAEs)
+    epochs: int = 2000  # "Training schedules": 2000 pre-training epochs
+    batches_per_epoch: int = 25  # "Training schedules": 25 batches per epoch
+    n_pretrain_images: int = 2000  # "Training schedules": 2000 images
+    occlusion_drop: float = 0.5  # "Training schedules": drop 50% of the object's pixels
+    image_size: int = 48  # "Implementation details": 48 x 48 images
+    # Not in the paper. Reference code: logvar = log(1e-3) + |dense|, a variance floor.
+    min_variance: float = 1e-3
+    # "sum": Gaussian log-likelihood with identity variance summed over pixels (the paper's
+    # "equivalent to a mean-squared error"). "mean": the reference code's per-pixel mean, the
+    # scale against which its beta and matching coefficients were tuned (= sum / 6912).
+    recon_reduction: str = "sum"
+    # The paper's matching loss has no stop-gradient (reference code default too); True
+    # detaches the clean encoding so only the occluded one moves.
+    matching_one_sided: bool = False
+
+    def __post_init__(self):
+        _check_positive(self, ("latent_dim", "feature_dim", "batch_size", "lr", "epochs",
+                               "batches_per_epoch", "n_pretrain_images", "image_size",
+                               "min_variance"))
+        if self.beta < 0:
+            raise ValueError(f"VAEConfig.beta must be >= 0, got {self.beta!r}")
+        if self.matching_coef < 0:
+            raise ValueError(f"VAEConfig.matching_coef must be >= 0, got {self.matching_coef!r}")
+        if not 0.0 <= self.occlusion_drop <= 1.0:
+            raise ValueError(f"VAEConfig.occlusion_drop must be in [0, 1], got {self.occlusion_drop!r}")
+        if self.recon_reduction not in ("sum", "mean"):
+            raise ValueError(f"VAEConfig.recon_reduction must be 'sum' or 'mean', got {self.recon_reduction!r}")
+
+    @property
+    def image_shape(self) -> tuple[int, int, int]:
+        return (self.image_size, self.image_size, 3)
+
+
+@dataclasses.dataclass(frozen=True)
+class LSTMConfig:
+    """The object LSTM g_psi on top of the frozen object-VAE's latent means."""
+
+    hidden: int = 128  # "Network Architectures": hidden size 128
+    layers: int = 2  # "Network Architectures": 2 layers
+    out_dim: int = 6  # = object-VAE latent size (Table 3): the output reconstructs the input
+    matching_coef: float = 50.0  # Table 3: LSTM matching loss coefficient
+    ae_coef: float = 1.0  # paper: unweighted L^ae (reference code used 0.5)
+    batch_size: int = 128  # "Training schedules": pre-training batch size 128
+    online_batch_size: int = 25  # "Training schedules": online batches of 25 trajectories
+    lr: float = 1e-3  # "Training schedules": learning rate 1e-3
+    epochs: int = 2000  # "Training schedules": 2000 pre-training epochs (auto-encoder loss only)
+    batches_per_epoch: int = 25  # "Training schedules": 25 batches per epoch
+    occlusion_drop: float = 0.5  # "Training schedules": drop 50% of the object's pixels
+    # "Robustness to Object Occlusions": the occluded frame t is drawn with t > 1 (1-based),
+    # i.e. 0-based index >= 1. (The reference code drew t >= 10 of 50.)
+    min_occlusion_t: int = 1
+    matching_one_sided: bool = False  # see VAEConfig.matching_one_sided
+    # "Training schedules", online LSTM training: (until env step, every k steps, n batches).
+    online_schedule: tuple[tuple[int, int, int], ...] = (
+        (5_000, 500, 80),
+        (50_000, 500, 20),
+        (2**62, 1000, 20),
+    )
+
+    def __post_init__(self):
+        _check_positive(self, ("hidden", "layers", "out_dim", "batch_size", "online_batch_size",
+                               "lr", "epochs", "batches_per_epoch", "min_occlusion_t"))
+        for name in ("matching_coef", "ae_coef"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"LSTMConfig.{name} must be >= 0, got {getattr(self, name)!r}")
+        if not 0.0 <= self.occlusion_drop <= 1.0:
+            raise ValueError(f"LSTMConfig.occlusion_drop must be in [0, 1], got {self.occlusion_drop!r}")
+        for until, every, batches in self.online_schedule:
+            if until <= 0 or every <= 0 or batches <= 0:
+                raise ValueError(f"LSTMConfig.online_schedule entries must be positive, got "
+                                 f"{(until, every, batches)!r}")
+
+    def online_batches(self, env_step: int) -> tuple[int, int]:
+        """(train every k env steps, batches per training) at `env_step` (Python int)."""
+        for until, every, batches in self.online_schedule:
+            if env_step < until:
+                return every, batches
+        return self.online_schedule[-1][1:]
+
+
+def scene_vae_config(task: str, algo: str = "roll", **overrides) -> VAEConfig:
+    """Scene-VAE of `task` for ROLL or Skew-Fit (Table 2, Table 3)."""
+    _check_task(task)
+    if algo not in ALGOS:
+        raise ValueError(f"unknown algo {algo!r}; expected one of {ALGOS}")
+    values = {
+        "latent_dim": _SCENE_LATENT[algo][task],  # Table 2
+        "beta": _SCENE_BETA[task],  # Table 2
+        "feature_dim": SCENE_FEATURE_DIM,
+        "matching_coef": 0.0,  # the scene-VAE uses the plain beta-VAE loss ("Training schedules")
+        "batch_size": 64,  # Table 3
+    }
+    return VAEConfig(**{**values, **overrides})
+
+
+def object_vae_config(task: str, **overrides) -> VAEConfig:
+    """Object-VAE of `task` (Table 2 matching coefficient, Table 3 for the rest)."""
+    _check_task(task)
+    values = {
+        "latent_dim": 6,  # Table 3
+        "beta": 20.0,  # Table 3
+        "feature_dim": OBJECT_FEATURE_DIM,
+        "matching_coef": _VAE_MATCHING_COEF[task],  # Table 2
+        "batch_size": 128,  # Table 3
+    }
+    return VAEConfig(**{**values, **overrides})
+
+
+def lstm_config(task: str, **overrides) -> LSTMConfig:
+    """Object LSTM of `task`: the same values for every task (Table 3)."""
+    _check_task(task)
+    return LSTMConfig(**overrides)

@@ -1,0 +1,208 @@
+"""Train states and pure training steps for the VAEs and the object LSTM.
+
+Every function is pure and jit-compatible with the config static (configs are frozen, hashable
+dataclasses): `jax.jit(vae_train_step, static_argnames="cfg")` etc. Shape/dtype errors are
+raised at trace time, i.e. before anything runs. One optax chain per parameter group: the
+optimizer is rebuilt from the config inside each step (it is stateless; only `opt_state`
+lives in the train state).
+
+Training scheme ("Robustness to Object Occlusions", "Training schedules"): the scene-VAE uses
+the plain beta-VAE loss; the object-VAE adds the VAE matching loss on a copy of each segmented
+image with 50% of its object pixels dropped; the LSTM is pre-trained with the auto-encoder
+loss only (`lstm_train_step(..., occlusion=None)`) and trained online with auto-encoder +
+matching loss, the occluded frame coming from `make_occlusion`.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Any
+
+import flax.struct
+import jax
+import jax.numpy as jnp
+import optax
+
+from configs.encoders import LSTMConfig, VAEConfig
+from roll_jax import losses
+from roll_jax.models import (
+    ConvVAE,
+    LSTMEncoder,
+    check_images,
+    init_key,
+    init_lstm_params,
+)
+
+
+@flax.struct.dataclass
+class VAEState:
+    params: Any
+    opt_state: Any
+    step: jax.Array
+
+
+@flax.struct.dataclass
+class LSTMState:
+    params: Any
+    opt_state: Any
+    step: jax.Array
+
+
+@flax.struct.dataclass
+class Occlusion:
+    """One synthetically occluded frame per trajectory: index t [B] and its VAE mean [B, d]."""
+
+    t: jax.Array
+    latent: jax.Array
+
+
+def vae_model(cfg: VAEConfig) -> ConvVAE:
+    return ConvVAE(latent_dim=cfg.latent_dim, feature_dim=cfg.feature_dim,
+                   min_variance=cfg.min_variance)
+
+
+def lstm_model(cfg: LSTMConfig) -> LSTMEncoder:
+    return LSTMEncoder(hidden=cfg.hidden, layers=cfg.layers, out_dim=cfg.out_dim)
+
+
+def vae_optimizer(cfg: VAEConfig) -> optax.GradientTransformation:
+    return optax.adam(cfg.lr)  # lr: "Training schedules"; Adam: reference code (rlkit)
+
+
+def lstm_optimizer(cfg: LSTMConfig) -> optax.GradientTransformation:
+    return optax.adam(cfg.lr)
+
+
+# --- VAE --------------------------------------------------------------------------------------
+
+@functools.partial(jax.jit, static_argnames="cfg")  # one compile instead of op-by-op init
+def init_vae(key: jax.Array, cfg: VAEConfig) -> VAEState:
+    key = init_key(key)
+    params = vae_model(cfg).init(key, jnp.zeros((1,) + cfg.image_shape, jnp.uint8), key)
+    return VAEState(params=params, opt_state=vae_optimizer(cfg).init(params),
+                    step=jnp.zeros((), jnp.int32))
+
+
+def _check_masks(masks, images) -> None:
+    if masks is not None and tuple(masks.shape) != tuple(images.shape[:-1]):
+        raise ValueError(f"object_masks must have shape {tuple(images.shape[:-1])} "
+                         f"(images without channels), got {tuple(masks.shape)}")
+
+
+def vae_train_step(state: VAEState, key: jax.Array, images: jax.Array, cfg: VAEConfig,
+                   object_masks: jax.Array | None = None) -> tuple[VAEState, dict]:
+    """One Adam step on a batch of images [B, 48, 48, 3] uint8; adds the matching loss on
+    synthetically occluded copies when cfg.matching_coef > 0 (object-VAE)."""
+    check_images(images)
+    _check_masks(object_masks, images)
+    k_noise, k_occ = jax.random.split(key)
+    occluded = None
+    if cfg.matching_coef > 0:
+        occluded = losses.occlude(k_occ, images, object_masks, cfg.occlusion_drop)
+
+    def loss_fn(p):
+        return losses.vae_loss(p, vae_model(cfg), images, k_noise, cfg.beta, occluded=occluded,
+                               matching_coef=cfg.matching_coef, one_sided=cfg.matching_one_sided,
+                               recon_reduction=cfg.recon_reduction)
+
+    grads, metrics = jax.grad(loss_fn, has_aux=True)(state.params)
+    updates, opt_state = vae_optimizer(cfg).update(grads, state.opt_state, state.params)
+    params = optax.apply_updates(state.params, updates)
+    return VAEState(params=params, opt_state=opt_state, step=state.step + 1), metrics
+
+
+def vae_fit_epoch(state: VAEState, key: jax.Array, dataset: jax.Array, cfg: VAEConfig,
+                  object_masks: jax.Array | None = None) -> tuple[VAEState, dict]:
+    """cfg.batches_per_epoch steps on minibatches of cfg.batch_size drawn uniformly (with
+    replacement, as rlkit does) from dataset [N, 48, 48, 3]; one lax.scan. Returns the
+    per-batch metrics stacked [batches_per_epoch]."""
+    check_images(dataset, "dataset")
+    _check_masks(object_masks, dataset)
+    n = dataset.shape[0]
+
+    def body(st, k):
+        k_idx, k_step = jax.random.split(k)
+        idx = jax.random.randint(k_idx, (cfg.batch_size,), 0, n)
+        masks = None if object_masks is None else object_masks[idx]
+        return vae_train_step(st, k_step, dataset[idx], cfg, masks)
+
+    return jax.lax.scan(body, state, jax.random.split(key, cfg.batches_per_epoch))
+
+
+def encode_mean(params: Any, cfg: VAEConfig, images: jax.Array) -> jax.Array:
+    """Encoder means of images [..., 48, 48, 3] -> [..., latent_dim] (the latents used for
+    rewards, goals and the LSTM input)."""
+    check_images(images)
+    mean, _ = vae_model(cfg).apply(params, images, method=ConvVAE.encode)
+    return mean
+
+
+def decode(params: Any, cfg: VAEConfig, z: jax.Array) -> jax.Array:
+    """Latents [..., latent_dim] -> mean images [..., 48, 48, 3] float in [0, 1]."""
+    return vae_model(cfg).apply(params, z, method=ConvVAE.decode)
+
+
+# --- LSTM -------------------------------------------------------------------------------------
+
+@functools.partial(jax.jit, static_argnames=("cfg", "in_dim"))
+def init_lstm(key: jax.Array, cfg: LSTMConfig, in_dim: int) -> LSTMState:
+    params = init_lstm_params(key, lstm_model(cfg), in_dim)
+    return LSTMState(params=params, opt_state=lstm_optimizer(cfg).init(params),
+                     step=jnp.zeros((), jnp.int32))
+
+
+def make_occlusion(key: jax.Array, vae_params: Any, vae_cfg: VAEConfig, images: jax.Array,
+                   cfg: LSTMConfig, object_masks: jax.Array | None = None) -> Occlusion:
+    """Pick t in [cfg.min_occlusion_t, T) per trajectory of images [B, T, 48, 48, 3], drop
+    cfg.occlusion_drop of frame t's object pixels and encode it with the frozen object-VAE."""
+    check_images(images)
+    if images.ndim != 5:
+        raise ValueError(f"images must be [B, T, 48, 48, 3], got shape {tuple(images.shape)}")
+    b, t_len = images.shape[:2]
+    if t_len <= cfg.min_occlusion_t:
+        raise ValueError(f"trajectories of length {t_len} leave no frame t >= "
+                         f"min_occlusion_t={cfg.min_occlusion_t} to occlude")
+    _check_masks(object_masks, images)
+    k_t, k_occ = jax.random.split(key)
+    t = jax.random.randint(k_t, (b,), cfg.min_occlusion_t, t_len)
+    frames = images[jnp.arange(b), t]
+    masks = None if object_masks is None else object_masks[jnp.arange(b), t]
+    occluded = losses.occlude(k_occ, frames, masks, cfg.occlusion_drop)
+    latent = jax.lax.stop_gradient(encode_mean(vae_params, vae_cfg, occluded))
+    return Occlusion(t=t, latent=latent)
+
+
+def lstm_train_step(state: LSTMState, key: jax.Array, seq_latents: jax.Array, cfg: LSTMConfig,
+                    occlusion: Occlusion | None = None) -> tuple[LSTMState, dict]:
+    """One Adam step on trajectories of object-VAE means seq_latents [B, T, d]: auto-encoder
+    loss, plus cfg.matching_coef * matching loss when an `occlusion` is given. `key` is
+    unused (kept for the uniform step signature)."""
+    del key
+    if seq_latents.ndim != 3:
+        raise ValueError(f"seq_latents must be [B, T, d], got shape {tuple(seq_latents.shape)}")
+    occ_latent = None if occlusion is None else occlusion.latent
+    occ_t = None if occlusion is None else occlusion.t
+
+    def loss_fn(p):
+        return losses.lstm_loss(p, lstm_model(cfg), seq_latents, occ_latent, occ_t,
+                                matching_coef=cfg.matching_coef, ae_coef=cfg.ae_coef,
+                                one_sided=cfg.matching_one_sided)
+
+    grads, metrics = jax.grad(loss_fn, has_aux=True)(state.params)
+    updates, opt_state = lstm_optimizer(cfg).update(grads, state.opt_state, state.params)
+    params = optax.apply_updates(state.params, updates)
+    return LSTMState(params=params, opt_state=opt_state, step=state.step + 1), metrics
+
+
+def lstm_fit_epoch(state: LSTMState, key: jax.Array, seq_dataset: jax.Array, cfg: LSTMConfig,
+                   batches: int | None = None) -> tuple[LSTMState, dict]:
+    """Auto-encoder pre-training: `batches` (default cfg.batches_per_epoch) steps on minibatches
+    of cfg.batch_size latent sequences drawn from seq_dataset [N, T, d]; one lax.scan."""
+    n = seq_dataset.shape[0]
+
+    def body(st, k):
+        k_idx, k_step = jax.random.split(k)
+        idx = jax.random.randint(k_idx, (cfg.batch_size,), 0, n)
+        return lstm_train_step(st, k_step, seq_dataset[idx], cfg)
+
+    return jax.lax.scan(body, state, jax.random.split(key, batches or cfg.batches_per_epoch))

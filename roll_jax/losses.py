@@ -1,0 +1,120 @@
+"""Encoder losses ("Using Segmented Images for Reward Computation", "Robustness to Object
+Occlusions"), as pure functions of (params, model definition, data).
+
+Conventions: squared norms are summed over latent dimensions (the paper's ||.||_2^2) and
+averaged over batch and time. The matching losses are two-sided by default, exactly the
+paper's equations (no stop-gradient on either encoding; also the reference code's default);
+`one_sided=True` detaches the clean encoding.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+
+from roll_jax.models import ConvVAE, LSTMEncoder, check_images, lstm_encode, to_float
+
+
+def kl_divergence(mean: jax.Array, logvar: jax.Array) -> jax.Array:
+    """KL(N(mean, exp(logvar)) || N(0, I)) summed over the last axis -> [...]."""
+    return 0.5 * jnp.sum(jnp.exp(logvar) + jnp.square(mean) - 1.0 - logvar, axis=-1)
+
+
+def squared_error(recon: jax.Array, images: jax.Array) -> jax.Array:
+    """Per-image sum of squared pixel errors (float images in [0, 1]) -> [...]."""
+    return jnp.sum(jnp.square(recon - to_float(images)), axis=(-3, -2, -1))
+
+
+def _sq_dist(a: jax.Array, b: jax.Array, one_sided: bool) -> jax.Array:
+    if one_sided:
+        a = jax.lax.stop_gradient(a)
+    return jnp.sum(jnp.square(a - b), axis=-1)
+
+
+def occlude(key: jax.Array, images: jax.Array, object_mask: jax.Array | None = None,
+            drop_frac: float = 0.5) -> jax.Array:
+    """Synthetic occlusion: zero each object pixel independently with probability `drop_frac`.
+
+    images [..., H, W, C] (segmented: non-object pixels are already 0); object_mask [..., H, W]
+    bool, default = pixels with any non-zero channel. Same dtype out; an empty image stays empty.
+    """
+    if object_mask is None:
+        object_mask = jnp.any(images != 0, axis=-1)
+    drop = jax.random.bernoulli(key, drop_frac, images.shape[:-1]) & object_mask.astype(bool)
+    return jnp.where(drop[..., None], jnp.zeros_like(images), images)
+
+
+def vae_matching_loss(params: Any, model: ConvVAE, images: jax.Array, occluded: jax.Array,
+                      one_sided: bool = False) -> jax.Array:
+    """L^matching(phi^s) = ||f(I^s) - f(I^s,occ)||^2 on the encoder means, batch mean."""
+    m_clean, _ = model.apply(params, images, method=ConvVAE.encode)
+    m_occ, _ = model.apply(params, occluded, method=ConvVAE.encode)
+    return jnp.mean(_sq_dist(m_clean, m_occ, one_sided))
+
+
+def vae_loss(params: Any, model: ConvVAE, images: jax.Array, key: jax.Array, beta: float,
+             occluded: jax.Array | None = None, matching_coef: float = 0.0,
+             one_sided: bool = False, recon_reduction: str = "sum") -> tuple[jax.Array, dict]:
+    """beta-VAE loss: squared error (Gaussian identity-variance NLL up to a constant) + beta KL,
+    batch mean; plus matching_coef * L^matching when `occluded` images are given.
+
+    recon_reduction "sum" sums the squared error over pixels (the log-likelihood); "mean"
+    averages it (reference-code scale).
+    """
+    check_images(images)
+    mean, logvar = model.apply(params, images, method=ConvVAE.encode)
+    z = mean + jnp.exp(0.5 * logvar) * jax.random.normal(key, mean.shape, mean.dtype)
+    recon = model.apply(params, z, method=ConvVAE.decode)
+    sse = squared_error(recon, images)
+    n_pix = images.shape[-1] * images.shape[-2] * images.shape[-3]
+    rec = jnp.mean(sse) if recon_reduction == "sum" else jnp.mean(sse) / n_pix
+    kl = jnp.mean(kl_divergence(mean, logvar))
+    loss = rec + beta * kl
+    metrics = {"recon": rec, "mse": jnp.mean(sse) / n_pix, "kl": kl}
+    if occluded is not None:
+        check_images(occluded, "occluded")
+        m_occ, _ = model.apply(params, occluded, method=ConvVAE.encode)
+        match = jnp.mean(_sq_dist(mean, m_occ, one_sided))
+        loss = loss + matching_coef * match
+        metrics["matching"] = match
+    metrics["loss"] = loss
+    return loss, metrics
+
+
+def insert_occlusion(latents: jax.Array, occ_latent: jax.Array, occ_t: jax.Array) -> jax.Array:
+    """Replace frame occ_t[b] of latents [B, T, d] by occ_latent[b] -> the occluded sequence."""
+    t_idx = jnp.arange(latents.shape[1])
+    hit = (t_idx[None, :] == occ_t[:, None])[..., None]
+    return jnp.where(hit, occ_latent[:, None, :], latents)
+
+
+def lstm_loss(params: Any, model: LSTMEncoder, latents: jax.Array,
+              occ_latent: jax.Array | None = None, occ_t: jax.Array | None = None,
+              matching_coef: float = 0.0, ae_coef: float = 1.0,
+              one_sided: bool = False) -> tuple[jax.Array, dict]:
+    """ae_coef * L^ae + matching_coef * L^matching(psi) on trajectories of object latents.
+
+    latents [B, T, d]: object-VAE means of the clean trajectories (one episode each; the
+    VAE is frozen, so they are constants). L^ae = mean_t ||z_t - zhat_t||^2. For matching,
+    frame occ_t[b] (0-based, >= 1) is replaced by occ_latent[b] (the VAE mean of the occluded
+    image) and L^matching = 1/(T-t+1) sum_{i>=t} ||z_i - z*_i||^2, averaged over the batch.
+    """
+    if latents.ndim != 3:
+        raise ValueError(f"latents must be [B, T, d], got shape {latents.shape}")
+    latents = jax.lax.stop_gradient(latents.astype(jnp.float32))
+    z = lstm_encode(params, latents, model=model)
+    ae = jnp.mean(jnp.sum(jnp.square(z - latents), axis=-1))
+    loss = ae_coef * ae
+    metrics = {"ae": ae}
+    if occ_latent is not None:
+        occ_seq = insert_occlusion(latents, jax.lax.stop_gradient(occ_latent), occ_t)
+        z_occ = lstm_encode(params, occ_seq, model=model)
+        window = (jnp.arange(latents.shape[1])[None, :] >= occ_t[:, None]).astype(jnp.float32)
+        per_step = _sq_dist(z, z_occ, one_sided)  # [B, T]
+        match = jnp.mean(jnp.sum(per_step * window, 1) / jnp.maximum(jnp.sum(window, 1), 1.0))
+        loss = loss + matching_coef * match
+        metrics["matching"] = match
+    metrics["loss"] = loss
+    return loss, metrics
