@@ -29,7 +29,7 @@ def _batch(key, n, reward_fn=None, done=1.0):
 
 def _train(cfg, n_steps, make_batch, seed=0):
     """n_steps of sac_update in one lax.scan; batches are built inside from the step key."""
-    state = sac.init_sac(jax.random.key(seed), OBS, GOAL, ACT, cfg)
+    state = init(jax.random.key(seed), OBS, GOAL, ACT, cfg)
 
     @jax.jit
     def run(state, key):
@@ -124,7 +124,7 @@ def test_critic_loss_zero_at_fixed_point():
     for q in ("q1", "q2"):
         qp["params"][q]["out"]["kernel"] = jnp.zeros_like(qp["params"][q]["out"]["kernel"])
         qp["params"][q]["out"]["bias"] = jnp.full_like(qp["params"][q]["out"]["bias"], 2.0)
-    loss, aux = sac.critic_loss(qp, state.target_q_params, state.policy_params, 1.0,
+    loss, aux = jax.jit(sac.critic_loss, static_argnums=6)(qp, state.target_q_params, state.policy_params, 1.0,
                                 _batch(jax.random.key(1), 16), jax.random.key(2), cfg)
     assert float(loss) < 1e-10 and float(aux["q_target_mean"]) == pytest.approx(2.0)
 
