@@ -1,2 +1,2 @@
-"""Typed per-task configs (one module per task, paper values tagged with their table): they
-arrive with the encoder and training issues. Task geometry lives in envs_mjx/tasks.py."""
+"""Typed configs: component dataclasses (segmentation, encoders, sac), the composed
+`train.TrainConfig`, and one module per task with that task's values (Table 2)."""

@@ -1,0 +1,160 @@
+"""The full training config: one frozen dataclass composed of the component configs.
+
+`make_config(task, algo, preset, **overrides)` is the only constructor the CLIs use; the
+per-task modules (configs/puck_push.py, ...) hold each task's values (horizon, run length,
+Skew-Fit alpha and schedule, Table 2), this module holds what all tasks share.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+
+from configs.encoders import LSTMConfig, VAEConfig, lstm_config, object_vae_config, scene_vae_config
+from configs.sac import SMOKE as SAC_SMOKE
+from configs.sac import SACConfig
+from configs.segmentation import SegmentationConfig, segmentation_config
+
+TASKS = ("puck_push", "hurdle_bottom", "hurdle_top", "door_open", "pickup")
+ALGOS = ("roll", "skewfit")
+PRESETS = ("smoke", "paper")
+
+# rlkit vae_schedules (Skew-Fit appendix C.5): epoch -> (train?, batches).
+VAE_SCHEDULES = ("custom_schedule", "custom_schedule_2")
+
+
+def vae_schedule(name: str, epoch: int) -> int:
+    """Scene-VAE batches to train after `epoch` (0 = no training), rlkit's schedules."""
+    if name == "custom_schedule":
+        if epoch < 10:
+            return 1000
+        if epoch < 300:
+            return 200
+        return 200 if epoch % 3 == 0 else 0
+    if name == "custom_schedule_2":
+        if epoch < 10:
+            return 1000
+        if epoch < 100:
+            return 200
+        return 200 if epoch % 2 == 0 else 0
+    raise ValueError(f"unknown VAE schedule {name!r}; expected one of {VAE_SCHEDULES}")
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainConfig:
+    task: str
+    algo: str
+    preset: str
+    horizon: int  # Table 2: trajectory length
+    total_env_steps: int  # per seed; SCENES.md: ROLL epochs x 500 steps
+    epoch_env_steps: int = 500  # rlkit num_expl_steps_per_train_loop (one compiled chunk)
+    n_envs: int = 10  # envs per seed stepping together (ours; 2 SAC updates per transition kept)
+    seeds: int = 1
+    eval_every_epochs: int = 10
+    n_eval_goals: int = 32  # test goals per evaluation (per seed)
+    skew_alpha: float = -1.0  # Table 2: Skew-Fit alpha for the scene-VAE
+    skew_num_latents: int = 10  # rlkit Skew-Fit priority: importance samples per image
+    vae_schedule: str = "custom_schedule_2"  # Skew-Fit appendix C.5 (rlkit vae_schedules)
+    vae_online_batch: int = 64  # Table 3: scene-VAE batch size
+    # Ablations (paper section "Ablations"), flags on --algo roll.
+    matching_loss: bool = True
+    use_lstm: bool = True
+    use_object_vae: bool = True
+    keep_checkpoints: int = 2
+    segmentation: SegmentationConfig = SegmentationConfig()
+    scene_vae: VAEConfig | None = None
+    object_vae: VAEConfig | None = None
+    lstm: LSTMConfig = LSTMConfig()
+    sac: SACConfig = SACConfig()
+
+    def __post_init__(self):
+        if self.task not in TASKS:
+            raise ValueError(f"unknown task {self.task!r}; expected one of {', '.join(TASKS)}")
+        if self.algo not in ALGOS:
+            raise ValueError(f"unknown algo {self.algo!r}; expected one of {', '.join(ALGOS)}")
+        if self.preset not in PRESETS:
+            raise ValueError(f"unknown preset {self.preset!r}; expected one of {', '.join(PRESETS)}")
+        for name in ("horizon", "total_env_steps", "epoch_env_steps", "n_envs", "seeds",
+                     "eval_every_epochs", "n_eval_goals", "vae_online_batch", "skew_num_latents",
+                     "keep_checkpoints"):
+            if getattr(self, name) <= 0:
+                raise ValueError(f"TrainConfig.{name} must be positive, got {getattr(self, name)}")
+        if self.epoch_env_steps % (self.n_envs * self.horizon):
+            raise ValueError(
+                f"TrainConfig.epoch_env_steps={self.epoch_env_steps} must be a multiple of "
+                f"n_envs * horizon = {self.n_envs} * {self.horizon}: a chunk runs whole episodes")
+        if self.total_env_steps % self.epoch_env_steps:
+            raise ValueError(f"TrainConfig.total_env_steps={self.total_env_steps} must be a "
+                             f"multiple of epoch_env_steps={self.epoch_env_steps}")
+        if self.vae_schedule not in VAE_SCHEDULES:
+            raise ValueError(f"unknown vae_schedule {self.vae_schedule!r}; expected one of "
+                             f"{VAE_SCHEDULES}")
+        ablated = [n for n, on in (("--no-matching-loss", not self.matching_loss),
+                                   ("--no-lstm", not self.use_lstm),
+                                   ("--no-object-vae", not self.use_object_vae)) if on]
+        if self.algo == "skewfit" and ablated:
+            raise ValueError(f"{', '.join(ablated)} ablate ROLL; they contradict --algo skewfit")
+        if not self.use_lstm and not self.use_object_vae:
+            raise ValueError("--no-lstm and --no-object-vae together remove the whole object "
+                             "encoder; pick one")
+        if self.sac.replay_size < self.horizon:
+            raise ValueError(f"replay_size={self.sac.replay_size} holds no whole episode of "
+                             f"horizon {self.horizon}")
+
+    @property
+    def n_epochs(self) -> int:
+        return self.total_env_steps // self.epoch_env_steps
+
+    @property
+    def episodes_per_epoch(self) -> int:
+        """Episodes each env runs per chunk."""
+        return self.epoch_env_steps // (self.n_envs * self.horizon)
+
+    @property
+    def updates_per_vector_step(self) -> int:
+        """SAC updates per step of all envs: updates_per_step per collected transition."""
+        return self.sac.updates_per_step * self.n_envs
+
+    @property
+    def scene(self) -> VAEConfig:
+        assert self.scene_vae is not None
+        return self.scene_vae
+
+    def to_json(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+def _task_module(task: str):
+    if task not in TASKS:
+        raise ValueError(f"unknown task {task!r}; expected one of {', '.join(TASKS)}")
+    return importlib.import_module(f"configs.{task}")
+
+
+# What the smoke preset shrinks (CPU, minutes); the rest stays at the paper's values.
+SMOKE_TRAIN = dict(total_env_steps=2000, epoch_env_steps=500, eval_every_epochs=1,
+                   n_eval_goals=4)
+SMOKE_VAE = dict(epochs=20, batches_per_epoch=5, n_pretrain_images=200)
+SMOKE_LSTM = dict(epochs=10, batches_per_epoch=5, batch_size=16, online_batch_size=4,
+                  online_schedule=((2**62, 500, 2),))
+
+
+def make_config(task: str, algo: str = "roll", preset: str = "paper", **overrides) -> TrainConfig:
+    """The config of `task` x `algo` x `preset`; keyword overrides win (nested configs are
+    replaced whole: pass e.g. sac=dataclasses.replace(cfg.sac, batch_size=256))."""
+    mod = _task_module(task)
+    if preset not in PRESETS:
+        raise ValueError(f"unknown preset {preset!r}; expected one of {', '.join(PRESETS)}")
+    values = dict(mod.TRAIN)
+    smoke = preset == "smoke"
+    vae_o = SMOKE_VAE if smoke else {}
+    values.update(
+        segmentation=segmentation_config(task, preset),
+        scene_vae=scene_vae_config(task, algo if algo in ALGOS else "roll", **vae_o),
+        object_vae=object_vae_config(task, **vae_o),
+        lstm=lstm_config(task, **(SMOKE_LSTM if smoke else {})),
+        sac=SACConfig(**(SAC_SMOKE if smoke else {})),
+    )
+    if smoke:
+        values.update(SMOKE_TRAIN)
+    values.update(overrides)
+    return TrainConfig(task=task, algo=algo, preset=preset, **values)
