@@ -66,21 +66,31 @@ def lstm_model(cfg: LSTMConfig) -> LSTMEncoder:
 
 
 def vae_optimizer(cfg: VAEConfig) -> optax.GradientTransformation:
-    return optax.adam(cfg.lr)  # lr: "Training schedules"; Adam: reference code (rlkit)
+    return _adam(cfg.lr)
 
 
 def lstm_optimizer(cfg: LSTMConfig) -> optax.GradientTransformation:
-    return optax.adam(cfg.lr)
+    return _adam(cfg.lr)
+
+
+def _adam(lr: float) -> optax.GradientTransformation:
+    return optax.adam(lr)  # lr: "Training schedules"; Adam: reference code (rlkit)
 
 
 # --- VAE --------------------------------------------------------------------------------------
 
-@functools.partial(jax.jit, static_argnames="cfg")  # one compile instead of op-by-op init
-def init_vae(key: jax.Array, cfg: VAEConfig) -> VAEState:
+# Jitted on the module (not the config), so configs that differ only in loss weights or
+# schedules share one compiled init; the whole state in one jit because op-by-op optimizer
+# init costs a compile per parameter shape.
+@functools.partial(jax.jit, static_argnums=(1, 2, 3))
+def _init_vae(key: jax.Array, model: ConvVAE, image_shape: tuple[int, ...], lr: float) -> VAEState:
     key = init_key(key)
-    params = vae_model(cfg).init(key, jnp.zeros((1,) + cfg.image_shape, jnp.uint8), key)
-    return VAEState(params=params, opt_state=vae_optimizer(cfg).init(params),
-                    step=jnp.zeros((), jnp.int32))
+    params = model.init(key, jnp.zeros((1,) + image_shape, jnp.uint8), key)
+    return VAEState(params=params, opt_state=_adam(lr).init(params), step=jnp.zeros((), jnp.int32))
+
+
+def init_vae(key: jax.Array, cfg: VAEConfig) -> VAEState:
+    return _init_vae(key, vae_model(cfg), cfg.image_shape, cfg.lr)
 
 
 def _check_masks(masks, images) -> None:
@@ -138,17 +148,20 @@ def encode_mean(params: Any, cfg: VAEConfig, images: jax.Array) -> jax.Array:
 
 
 def decode(params: Any, cfg: VAEConfig, z: jax.Array) -> jax.Array:
-    """Latents [..., latent_dim] -> mean images [..., 48, 48, 3] float in [0, 1]."""
-    return vae_model(cfg).apply(params, z, method=ConvVAE.decode)
+    """Latents [..., latent_dim] -> decoded images [..., 48, 48, 3] float, clipped to [0, 1]."""
+    return jnp.clip(vae_model(cfg).apply(params, z, method=ConvVAE.decode), 0.0, 1.0)
 
 
 # --- LSTM -------------------------------------------------------------------------------------
 
-@functools.partial(jax.jit, static_argnames=("cfg", "in_dim"))
+@functools.partial(jax.jit, static_argnums=(1, 2, 3))
+def _init_lstm(key: jax.Array, model: LSTMEncoder, in_dim: int, lr: float) -> LSTMState:
+    params = init_lstm_params(key, model, in_dim)
+    return LSTMState(params=params, opt_state=_adam(lr).init(params), step=jnp.zeros((), jnp.int32))
+
+
 def init_lstm(key: jax.Array, cfg: LSTMConfig, in_dim: int) -> LSTMState:
-    params = init_lstm_params(key, lstm_model(cfg), in_dim)
-    return LSTMState(params=params, opt_state=lstm_optimizer(cfg).init(params),
-                     step=jnp.zeros((), jnp.int32))
+    return _init_lstm(key, lstm_model(cfg), in_dim, cfg.lr)
 
 
 def make_occlusion(key: jax.Array, vae_params: Any, vae_cfg: VAEConfig, images: jax.Array,

@@ -27,10 +27,11 @@ def squared_error(recon: jax.Array, images: jax.Array) -> jax.Array:
     return jnp.sum(jnp.square(recon - to_float(images)), axis=(-3, -2, -1))
 
 
-def _sq_dist(a: jax.Array, b: jax.Array, one_sided: bool) -> jax.Array:
+def matching_distance(clean: jax.Array, occluded: jax.Array, one_sided: bool = False) -> jax.Array:
+    """||clean - occluded||^2 over the last axis; `one_sided` stops the gradient into `clean`."""
     if one_sided:
-        a = jax.lax.stop_gradient(a)
-    return jnp.sum(jnp.square(a - b), axis=-1)
+        clean = jax.lax.stop_gradient(clean)
+    return jnp.sum(jnp.square(clean - occluded), axis=-1)
 
 
 def occlude(key: jax.Array, images: jax.Array, object_mask: jax.Array | None = None,
@@ -51,7 +52,7 @@ def vae_matching_loss(params: Any, model: ConvVAE, images: jax.Array, occluded: 
     """L^matching(phi^s) = ||f(I^s) - f(I^s,occ)||^2 on the encoder means, batch mean."""
     m_clean, _ = model.apply(params, images, method=ConvVAE.encode)
     m_occ, _ = model.apply(params, occluded, method=ConvVAE.encode)
-    return jnp.mean(_sq_dist(m_clean, m_occ, one_sided))
+    return jnp.mean(matching_distance(m_clean, m_occ, one_sided))
 
 
 def vae_loss(params: Any, model: ConvVAE, images: jax.Array, key: jax.Array, beta: float,
@@ -76,7 +77,7 @@ def vae_loss(params: Any, model: ConvVAE, images: jax.Array, key: jax.Array, bet
     if occluded is not None:
         check_images(occluded, "occluded")
         m_occ, _ = model.apply(params, occluded, method=ConvVAE.encode)
-        match = jnp.mean(_sq_dist(mean, m_occ, one_sided))
+        match = jnp.mean(matching_distance(mean, m_occ, one_sided))
         loss = loss + matching_coef * match
         metrics["matching"] = match
     metrics["loss"] = loss
@@ -112,7 +113,7 @@ def lstm_loss(params: Any, model: LSTMEncoder, latents: jax.Array,
         occ_seq = insert_occlusion(latents, jax.lax.stop_gradient(occ_latent), occ_t)
         z_occ = lstm_encode(params, occ_seq, model=model)
         window = (jnp.arange(latents.shape[1])[None, :] >= occ_t[:, None]).astype(jnp.float32)
-        per_step = _sq_dist(z, z_occ, one_sided)  # [B, T]
+        per_step = matching_distance(z, z_occ, one_sided)  # [B, T]
         match = jnp.mean(jnp.sum(per_step * window, 1) / jnp.maximum(jnp.sum(window, 1), 1.0))
         loss = loss + matching_coef * match
         metrics["matching"] = match

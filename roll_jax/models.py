@@ -6,9 +6,13 @@ ReLU; flatten; Dense(feature_dim) (576 scene, 6 object) with no activation (as i
 reference code's CNN head); then Dense heads for the mean and the log-variance. Decoder:
 Dense(576) + ReLU -> 3x3x64 -> transposed convs 3x3/3x3/6x6, 32/16/3 filters, strides 2/2/3,
 VALID padding (no padding, like PyTorch's padding=0): (3-1)*2+3 = 7, (7-1)*2+3 = 15,
-(15-1)*3+6 = 48. A sigmoid keeps the mean image in [0, 1]; with the Gaussian identity-variance
-decoder the log-likelihood is the squared error (losses.py). The log-variance has a floor,
-log(min_variance) + |dense| (reference code; stops the posterior variance collapsing to 0).
+(15-1)*3+6 = 48. The output is the mean of the Gaussian identity-variance decoder, so the
+log-likelihood is the squared error (losses.py). It is linear, like the reference code's
+(which clamps to [0, 1]): a sigmoid output was tried and gets stuck on segmented images -- it
+first learns the black background, saturates, and the vanishing sigmoid gradient never lets
+it learn the object (moving-disc test: stuck at the all-black MSE 0.0114; linear reaches 0.001
+in 250 steps at beta=1). `encoders.decode` clips to [0, 1] for display. The log-variance has
+a floor, log(min_variance) + |dense| (reference code; keeps the posterior variance > 0).
 
 LSTMEncoder: g_psi of "Robustness to Object Occlusions", a 2-layer LSTM (hidden 128) over the
 object-VAE latent means, then Dense(out_dim). Auto-encoder target: the paper's equation
@@ -86,7 +90,8 @@ class ConvVAE(nn.Module):
         return mean.reshape(lead + (-1,)), logvar.reshape(lead + (-1,))
 
     def decode(self, z: jax.Array) -> jax.Array:
-        """Latents [..., latent] -> mean images [..., 48, 48, 3] in [0, 1]."""
+        """Latents [..., latent] -> Gaussian decoder means [..., 48, 48, 3] (unbounded; the
+        data are in [0, 1], clip for display: `encoders.decode` does)."""
         lead = z.shape[:-1]
         h = nn.relu(self.dec_fc(z.reshape(-1, z.shape[-1])))
         h = h.reshape((-1,) + _FEATURE_MAP)
@@ -95,7 +100,7 @@ class ConvVAE(nn.Module):
             if i < len(self.deconvs) - 1:
                 h = nn.relu(h)
         assert h.shape[1:] == IMAGE_SHAPE, h.shape
-        return nn.sigmoid(h).reshape(lead + IMAGE_SHAPE)
+        return h.reshape(lead + IMAGE_SHAPE)
 
     def __call__(self, x: jax.Array, key: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
         """Reparameterised pass: (reconstruction, mean, logvar)."""
