@@ -10,7 +10,13 @@ from __future__ import annotations
 import dataclasses
 import importlib
 
-from configs.encoders import LSTMConfig, VAEConfig, lstm_config, object_vae_config, scene_vae_config
+from configs.encoders import (
+    LSTMConfig,
+    VAEConfig,
+    lstm_config,
+    object_vae_config,
+    scene_vae_config,
+)
 from configs.sac import SMOKE as SAC_SMOKE
 from configs.sac import SACConfig
 from configs.segmentation import SegmentationConfig, segmentation_config
@@ -61,11 +67,11 @@ class TrainConfig:
     use_lstm: bool = True
     use_object_vae: bool = True
     keep_checkpoints: int = 2
-    segmentation: SegmentationConfig = SegmentationConfig()
+    segmentation: SegmentationConfig = dataclasses.field(default_factory=SegmentationConfig)
     scene_vae: VAEConfig | None = None
     object_vae: VAEConfig | None = None
-    lstm: LSTMConfig = LSTMConfig()
-    sac: SACConfig = SACConfig()
+    lstm: LSTMConfig = dataclasses.field(default_factory=LSTMConfig)
+    sac: SACConfig = dataclasses.field(default_factory=SACConfig)
 
     def __post_init__(self):
         if self.task not in TASKS:
@@ -131,11 +137,11 @@ def _task_module(task: str):
 
 
 # What the smoke preset shrinks (CPU, minutes); the rest stays at the paper's values.
-SMOKE_TRAIN = dict(total_env_steps=2000, epoch_env_steps=500, eval_every_epochs=1,
-                   n_eval_goals=4)
-SMOKE_VAE = dict(epochs=20, batches_per_epoch=5, n_pretrain_images=200)
-SMOKE_LSTM = dict(epochs=10, batches_per_epoch=5, batch_size=16, online_batch_size=4,
-                  online_schedule=((2**62, 500, 2),))
+SMOKE_TRAIN = {"total_env_steps": 2000, "epoch_env_steps": 500, "eval_every_epochs": 1,
+                   "n_eval_goals": 4}
+SMOKE_VAE = {"epochs": 20, "batches_per_epoch": 5, "n_pretrain_images": 200}
+SMOKE_LSTM = {"epochs": 10, "batches_per_epoch": 5, "batch_size": 16, "online_batch_size": 4,
+                  "online_schedule": ((2**62, 500, 2),)}
 
 
 def make_config(task: str, algo: str = "roll", preset: str = "paper", **overrides) -> TrainConfig:

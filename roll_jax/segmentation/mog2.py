@@ -125,7 +125,7 @@ def init(h: int, w: int, c: int, history: int = 500, var_threshold: float = 16.0
     # OpenCV's constructor falls back to its defaults for non-positive values.
     history = int(history) if history > 0 else 500
     var_threshold = float(np.float32(var_threshold)) if var_threshold > 0 else 16.0
-    f32 = lambda v: float(np.float32(v))  # noqa: E731  (OpenCV stores these as float)
+    f32 = lambda v: float(np.float32(v))
     m = int(n_mixtures)
     return MOG2Model(
         weights=jnp.zeros((m, h, w), jnp.float32),
@@ -155,14 +155,14 @@ def _user_rate(learning_rate: Any, ct: float, shape: tuple[int, ...] = ()) -> di
     """Per-call rate inputs (traced): float32 alphaT/prune of a user rate plus two flags."""
     if isinstance(learning_rate, jax.Array) and not isinstance(learning_rate, np.ndarray):
         lr = jnp.broadcast_to(jnp.asarray(learning_rate, jnp.float32), shape)
-        return dict(alpha=lr, prune=-lr * np.float32(ct), nonneg=lr >= 0, reset=lr >= 1)
+        return {"alpha": lr, "prune": -lr * np.float32(ct), "nonneg": lr >= 0, "reset": lr >= 1}
     lr = np.asarray(learning_rate, dtype=np.float64)
     if lr.ndim and lr.shape != shape[-lr.ndim:]:
         raise ValueError(f"learning_rate with shape {lr.shape}: expected a scalar or {shape}")
     lr = np.broadcast_to(lr, shape)
-    return dict(alpha=jnp.asarray(lr.astype(np.float32)),
-                prune=jnp.asarray((-lr * np.float64(np.float32(ct))).astype(np.float32)),
-                nonneg=jnp.asarray(lr >= 0), reset=jnp.asarray(lr >= 1))
+    return {"alpha": jnp.asarray(lr.astype(np.float32)),
+                "prune": jnp.asarray((-lr * np.float64(np.float32(ct))).astype(np.float32)),
+                "nonneg": jnp.asarray(lr >= 0), "reset": jnp.asarray(lr >= 1)}
 
 
 # ----------------------------------------------------------------------------- the update
@@ -482,14 +482,21 @@ def background_image(model: MOG2Model) -> jax.Array:
 def _foreground_jit(model: MOG2Model, frames: jax.Array, shadows_as_foreground: bool):
     TRACE_COUNTS["foreground"] += 1
     # The next-frame step at lr = 0 (alphaT = 0, prune = -0.0), each frame from the same model.
-    rate = dict(alpha=jnp.float32(0), prune=jnp.float32(-0.0), nonneg=jnp.bool_(True),
-                reset=jnp.bool_(False))
+    rate = {"alpha": jnp.float32(0), "prune": jnp.float32(-0.0), "nonneg": jnp.bool_(True),
+                "reset": jnp.bool_(False)}
     # Vectorised over chunks of frames (bounded memory for long videos).
     masks = lax.map(lambda f: _apply_impl(model, f, rate)[1], frames,
                     batch_size=min(frames.shape[0], 256))
     if shadows_as_foreground:
         return masks != 0
     return masks == 255
+
+
+def frozen_foreground(model: MOG2Model, frames: jax.Array,
+                      shadows_as_foreground: bool = True) -> jax.Array:
+    """`foreground` without input checks, for use inside a caller's jit: frames uint8[N, H, W, C]
+    -> bool[N, H, W]."""
+    return _foreground_jit(model, frames, shadows_as_foreground)
 
 
 def foreground(model: MOG2Model, frames: Any, shadows_as_foreground: bool = True) -> jax.Array:

@@ -1,0 +1,295 @@
+"""Unknown-object segmentation: background model + robot U-Net -> object mask.
+
+Paper section "Unknown Object Segmentation" and appendix B.1:
+
+1. random actions in the object-free scene (`env.empty_scene()`) give `n_frames` images;
+   MOG2 is fitted on them with history = n_frames and OpenCV's automatic learning rate;
+2. the frozen MOG2's foreground on those same frames labels the robot;
+3. a U-Net learns robot-vs-rest from those labels, with synthetic object-like distractors
+   pasted in and labelled not-robot (otherwise anything that moves would be "robot");
+4. `segment(params, rgb)`: object mask = MOG2 foreground (lr 0, shadows count) AND NOT
+   robot (U-Net probability > threshold); segmented image = rgb * mask.
+
+The algorithm never reads ground-truth labels; `evaluate` uses them to score the masks.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from flax import struct
+
+from configs.segmentation import SegmentationConfig
+from roll_jax.segmentation import mog2, unet
+
+CHECKPOINT_VERSION = 1
+
+
+@struct.dataclass
+class SegParams:
+    """Everything `segment` needs; a pytree, so it lives inside the training state."""
+
+    background: mog2.MOG2Model  # frozen after fitting
+    unet: unet.UNetState
+    robot_threshold: jax.Array  # float32 scalar
+
+
+# ----------------------------------------------------------------------------- data
+
+def _uniform(key, low, high):
+    low, high = jnp.asarray(low, jnp.float32), jnp.asarray(high, jnp.float32)
+    return low + (high - low) * jax.random.uniform(key, low.shape)
+
+
+def record_empty_scene(env, key, n_frames: int, n_envs: int, width: int = 48,
+                       height: int = 48) -> jax.Array:
+    """uint8[n_frames, H, W, 3] of the robot moving at random in the object-free scene.
+
+    `n_envs` random walks run side by side, each starting from a random hand position in the
+    task's hand box; frames are interleaved in time (env 0 step 0, env 1 step 0, ...), which
+    MOG2, a per-pixel statistic, does not mind.
+    """
+    from envs_mjx.rollout import random_actions, rollout
+
+    empty = env.empty_scene()
+    steps = -(-n_frames // n_envs)
+    lo, hi = env.spec.hand_low, env.spec.hand_high
+
+    def one(k):
+        k_hand, k_act = jax.random.split(k)
+        state = empty.place(_uniform(k_hand, lo, hi))
+        _, traj = rollout(empty, state, random_actions(k_act, steps, empty.action_size),
+                          render=True, width=width, height=height)
+        return traj.rgb
+
+    rgb = jax.jit(jax.vmap(one))(jax.random.split(key, n_envs))  # [E, T, H, W, 3]
+    rgb = jnp.swapaxes(rgb, 0, 1).reshape((-1,) + rgb.shape[2:])
+    return rgb[:n_frames]
+
+
+def fit_background(frames, cfg: SegmentationConfig) -> mog2.MOG2Model:
+    """MOG2 with history = number of frames, automatic learning rate (appendix B.1)."""
+    frames = jnp.asarray(frames)
+    h, w, c = frames.shape[1:]
+    model = mog2.init(h, w, c, history=frames.shape[0], var_threshold=cfg.var_threshold,
+                      detect_shadows=cfg.detect_shadows, n_mixtures=cfg.n_mixtures)
+    model, _ = mog2.apply_video(model, frames, learning_rate=-1.0)
+    return model
+
+
+def paste_distractors(key, images, labels, prob: float):
+    """Paste one object-like blob (ellipse or box, random size and colour) into each image with
+    probability `prob`; its pixels become not-robot. Pure and jittable (per minibatch)."""
+    n, h, w, _ = images.shape
+    ks = jax.random.split(key, 6)
+    use = jax.random.uniform(ks[0], (n,)) < prob
+    scale = min(h, w) / 48.0  # sizes below are for 48x48 images
+    cy = jax.random.uniform(ks[1], (n,), minval=0, maxval=h)
+    cx = jax.random.uniform(ks[2], (n,), minval=0, maxval=w)
+    radii = jax.random.uniform(ks[3], (n, 2), minval=1.5 * scale, maxval=8.0 * scale)
+    colour = jax.random.randint(ks[4], (n, 3), 0, 256).astype(jnp.uint8)
+    is_box = jax.random.bernoulli(ks[5], 0.5, (n,))
+    yy, xx = jnp.mgrid[0:h, 0:w]
+    dy = (yy[None] + 0.5 - cy[:, None, None]) / radii[:, 0, None, None]
+    dx = (xx[None] + 0.5 - cx[:, None, None]) / radii[:, 1, None, None]
+    ellipse = dy ** 2 + dx ** 2 <= 1.0
+    box = (jnp.abs(dy) <= 1.0) & (jnp.abs(dx) <= 1.0)
+    blob = jnp.where(is_box[:, None, None], box, ellipse) & use[:, None, None]
+    images = jnp.where(blob[..., None], colour[:, None, None, :], images)
+    labels = jnp.where(blob, jnp.zeros_like(labels), labels)
+    return images, labels
+
+
+# ----------------------------------------------------------------------------- fitting
+
+def fit(env, key, cfg: SegmentationConfig, progress=None, frames=None):
+    """Fit the background model and the robot U-Net for `env`'s task.
+
+    Returns (SegParams, info) where info holds the recorded frames, robot labels and the
+    U-Net's loss history (for figures and tests)."""
+    k_rec, k_unet = jax.random.split(key)
+    if frames is None:
+        frames = record_empty_scene(env, k_rec, cfg.n_frames, cfg.n_envs)
+    background = fit_background(frames, cfg)
+    robot = mog2.foreground(background, frames, shadows_as_foreground=True)
+    augment = lambda k, x, y: paste_distractors(k, x, y, cfg.distractor_prob)
+    state, history = unet.fit_unet(k_unet, frames, robot.astype(jnp.float32), cfg,
+                                   augment_fn=augment, progress=progress)
+    params = SegParams(background=background, unet=state,
+                       robot_threshold=jnp.float32(cfg.robot_threshold))
+    return params, {"frames": frames, "robot_labels": robot, "unet_loss": history}
+
+
+# ----------------------------------------------------------------------------- segment
+
+def _check_rgb(params: SegParams, rgb) -> None:
+    shape = tuple(params.background.image_shape)
+    got_shape = tuple(getattr(rgb, "shape", ()))
+    dtype = getattr(rgb, "dtype", None)
+    if got_shape[-3:] != shape or dtype != jnp.uint8:
+        raise ValueError(f"segment: expected uint8 images [..., {shape[0]}, {shape[1]}, "
+                         f"{shape[2]}], got {dtype} {list(got_shape)}")
+
+
+def masks(params: SegParams, rgb):
+    """(foreground, robot, object) bool masks [..., H, W] for uint8 rgb [..., H, W, 3]."""
+    lead, img = rgb.shape[:-3], rgb.shape[-3:]
+    flat = rgb.reshape((-1,) + img)
+    fg = mog2.frozen_foreground(params.background, flat)
+    robot = unet.robot_probability(params.unet, flat) > params.robot_threshold
+    obj = fg & ~robot
+    return tuple(m.reshape(lead + img[:2]) for m in (fg, robot, obj))
+
+
+def segment(params: SegParams, rgb):
+    """Object mask bool[..., H, W] of uint8 rgb [..., H, W, 3]; pure and jittable."""
+    if not isinstance(rgb, jax.core.Tracer):
+        _check_rgb(params, rgb)
+    return masks(params, rgb)[2]
+
+
+def segmented_image(rgb, mask):
+    """rgb * mask: the object on black (the object-VAE's input)."""
+    return jnp.where(mask[..., None], rgb, jnp.zeros_like(rgb))
+
+
+# ----------------------------------------------------------------------------- evaluation
+
+def random_object_states(env, key, n: int, settle_steps: int = 5):
+    """States with the hand and the object uniform in their boxes (object in its goal space),
+    after a few random steps so the scene settles; returns (rgb, labels) [n, H, W, ...]."""
+    from envs_mjx.rollout import random_actions, rollout
+
+    s = env.spec
+
+    def one(k):
+        k_h, k_o, k_a = jax.random.split(k, 3)
+        state = env.place(_uniform(k_h, s.hand_low, s.hand_high),
+                          _uniform(k_o, s.object_goal_low, s.object_goal_high))
+        state, _ = rollout(env, state, random_actions(k_a, settle_steps, env.action_size))
+        return env.render_both(state)
+
+    return jax.jit(jax.vmap(one))(jax.random.split(key, n))
+
+
+def mask_scores(pred, labels):
+    """Per-image IoU with labels == 2, robot leakage (share of robot pixels kept) and
+    background leakage (share of background pixels kept)."""
+    obj, robot, bg = labels == 2, labels == 1, labels == 0
+    axes = (-2, -1)
+
+    def frac(a, b):
+        return (a & b).sum(axes) / jnp.maximum(b.sum(axes), 1)
+
+    iou = (pred & obj).sum(axes) / jnp.maximum((pred | obj).sum(axes), 1)
+    return {"iou": iou, "robot_leakage": frac(pred, robot), "background_leakage": frac(pred, bg)}
+
+
+def evaluate(env, params: SegParams, key, n_states: int) -> tuple[dict, dict]:
+    """Scores over `n_states` random states whose object is visible; (summary, arrays)."""
+    rgb, labels = random_object_states(env, key, int(n_states * 1.5) + 8)
+    rgb, labels = np.asarray(rgb), np.asarray(labels)
+    visible = (labels == 2).sum((-2, -1)) > 0
+    rgb, labels = rgb[visible][:n_states], labels[visible][:n_states]
+    fg, robot, obj = jax.jit(masks)(params, jnp.asarray(rgb))
+    scores = {k: np.asarray(v) for k, v in mask_scores(obj, jnp.asarray(labels)).items()}
+    has_robot = (labels == 1).sum((-2, -1)) > 0
+    pooled_iou = float(((np.asarray(obj) & (labels == 2)).sum())
+                       / max(((np.asarray(obj) | (labels == 2)).sum()), 1))
+    summary = {
+        "task": env.name, "n_states": len(rgb),
+        "iou": float(scores["iou"].mean()),
+        "iou_median": float(np.median(scores["iou"])),
+        "iou_pooled": pooled_iou,
+        "robot_leakage": float(scores["robot_leakage"][has_robot].mean()),
+        "background_leakage": float(scores["background_leakage"].mean()),
+        "object_pixels_mean": float((labels == 2).sum((-2, -1)).mean()),
+    }
+    arrays = dict(rgb=rgb, labels=labels, foreground=np.asarray(fg), robot=np.asarray(robot),
+                  object=np.asarray(obj), **scores)
+    return summary, arrays
+
+
+def figure2(arrays: dict, path: str, n: int = 4) -> None:
+    """The paper's Figure 2 panel for `n` states: original, foreground, robot mask, object
+    mask, segmented object."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    titles = ("original", "foreground", "robot mask", "object mask", "segmented object")
+    n = min(n, len(arrays["rgb"]))
+    fig, axes = plt.subplots(n, 5, figsize=(7.5, 1.6 * n), squeeze=False)
+    for i in range(n):
+        rgb = arrays["rgb"][i]
+        seg = np.where(arrays["object"][i][..., None], rgb, 0)
+        panels = (rgb, arrays["foreground"][i], arrays["robot"][i], arrays["object"][i], seg)
+        for j, img in enumerate(panels):
+            ax = axes[i, j]
+            ax.imshow(img, cmap="gray", vmin=0, vmax=1, interpolation="nearest")
+            ax.set_xticks([])
+            ax.set_yticks([])
+            if i == 0:
+                ax.set_title(titles[j], fontsize=8)
+        axes[i, 0].set_ylabel(f"IoU {arrays['iou'][i]:.2f}", fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+# ----------------------------------------------------------------------------- checkpoints
+
+def _meta(task: str, params: SegParams, cfg: SegmentationConfig) -> dict:
+    h, w, c = params.background.image_shape
+    return {"version": CHECKPOINT_VERSION, "task": task, "image_shape": [h, w, c],
+                "unet_features": cfg.unet_features, "config": dataclasses.asdict(cfg)}
+
+
+def save(path: str, task: str, params: SegParams, cfg: SegmentationConfig) -> None:
+    """Orbax checkpoint of the params plus a meta.json naming task and image size."""
+    import orbax.checkpoint as ocp
+
+    path = os.path.abspath(path)
+    os.makedirs(path, exist_ok=True)
+    with ocp.StandardCheckpointer() as ckptr:
+        ckptr.save(os.path.join(path, "params"), params, force=True)
+    with open(os.path.join(path, "meta.json"), "w") as f:
+        json.dump(_meta(task, params, cfg), f, indent=2)
+
+
+def load(path: str, task: str, image_shape=(48, 48, 3)) -> tuple[SegParams, SegmentationConfig]:
+    """Restore a checkpoint; refuses one fitted for another task or image size."""
+    import orbax.checkpoint as ocp
+
+    path = os.path.abspath(path)
+    meta_path = os.path.join(path, "meta.json")
+    if not os.path.exists(meta_path):
+        raise FileNotFoundError(f"no segmentation checkpoint at {path} (missing meta.json)")
+    with open(meta_path) as f:
+        meta = json.load(f)
+    if meta["task"] != task:
+        raise ValueError(f"segmentation checkpoint {path} was fitted for task "
+                         f"{meta['task']!r}, not {task!r}")
+    if tuple(meta["image_shape"]) != tuple(image_shape):
+        raise ValueError(f"segmentation checkpoint {path} is for images {meta['image_shape']}, "
+                         f"not {list(image_shape)}")
+    cfg = SegmentationConfig(**meta["config"])
+    h, w, c = image_shape
+    target = jax.eval_shape(lambda: _empty_params(h, w, c, cfg))
+    with ocp.StandardCheckpointer() as ckptr:
+        params = ckptr.restore(os.path.join(path, "params"), target)
+    return params, cfg
+
+
+def _empty_params(h: int, w: int, c: int, cfg: SegmentationConfig) -> SegParams:
+    background = mog2.init(h, w, c, history=cfg.n_frames, var_threshold=cfg.var_threshold,
+                           detect_shadows=cfg.detect_shadows, n_mixtures=cfg.n_mixtures)
+    state = unet.init_unet(jax.random.PRNGKey(0), cfg.unet_features, h, w)
+    return SegParams(background=background, unet=state,
+                     robot_threshold=jnp.float32(cfg.robot_threshold))
