@@ -1,0 +1,321 @@
+"""One compiled training chunk (an rlkit "epoch"): collect, store, learn; Algorithm 1.
+
+A chunk, for one seed (the seed axis is a vmap over all of it):
+  1. `episodes_per_epoch` x `horizon` steps of all envs in a `lax.scan`: scene-VAE encodes the
+     rendered image, the policy acts (uniformly at random before learning starts), MJX steps,
+     the renderer draws;
+  2. per finished episode: `segment` the frames, encode them (object-VAE, LSTM), store the
+     whole trajectories with cached latents in the replay buffer;
+  3. 2 SAC updates per collected transition on HER-relabeled batches (rlkit's order: collect
+     the epoch's steps, then train);
+  4. scheduled scene-VAE training on Skew-Fit-skewed replay images and online LSTM training
+     (auto-encoder + matching loss), then a refresh of every cached latent in the buffer.
+How much of 3 and 4 happens is decided per chunk in Python (schedules are functions of the
+env step) and passed in as un-batched scalars, so the chunk compiles once.
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+from flax import struct
+
+from configs.train import TrainConfig, vae_schedule
+from roll_jax import encoders, replay, sac
+from roll_jax.agent import Frozen, GoalEncoder, goal_encoder
+from roll_jax.models import ConvVAE, to_float
+
+TRACE_COUNTS: collections.Counter = collections.Counter()
+
+
+@struct.dataclass
+class TrainState:
+    """Everything one seed carries from chunk to chunk (checkpointed whole)."""
+
+    sac: sac.SACState
+    scene_vae: encoders.VAEState
+    lstm: Any  # encoders.LSTMState, or None without LSTM
+    buffer: replay.ReplayBuffer
+    env_state: Any  # EnvState batched over envs [E]
+    key: jax.Array
+    env_steps: jax.Array  # int32, per seed
+    epoch: jax.Array  # int32
+
+
+@struct.dataclass
+class ChunkPlan:
+    """Un-batched per-chunk switches computed in Python from the schedules."""
+
+    learn: jax.Array  # bool: SAC updates on (learning_starts reached)
+    act_random: jax.Array  # bool: uniform random actions (before learning_starts)
+    vae_batches: jax.Array  # int32: scene-VAE batches after collection (0 = none)
+    lstm_batches: jax.Array  # int32: LSTM batches after collection (0 = none)
+
+
+def plan_chunk(cfg: TrainConfig, epoch: int) -> ChunkPlan:
+    """The schedules of Skew-Fit (scene-VAE) and ROLL (LSTM, appendix "Training schedules")."""
+    start = epoch * cfg.epoch_env_steps
+    end = start + cfg.epoch_env_steps
+    learn = end >= cfg.sac.learning_starts
+    lstm_batches = 0
+    if goal_encoder(cfg).lstm:
+        every, batches = cfg.lstm.online_batches(start)
+        # Train when the epoch crosses a multiple of `every` env steps.
+        if end // every > start // every:
+            lstm_batches = batches
+    return ChunkPlan(learn=jnp.bool_(learn), act_random=jnp.bool_(start < cfg.sac.learning_starts),
+                     vae_batches=jnp.int32(vae_schedule(cfg.vae_schedule, epoch)),
+                     lstm_batches=jnp.int32(lstm_batches))
+
+
+# ----------------------------------------------------------------------------- init
+
+def init_state(key, cfg: TrainConfig, env, scene_vae: encoders.VAEState, lstm) -> TrainState:
+    """A fresh seed: new SAC nets, given (pretrained) scene-VAE and LSTM, empty buffer."""
+    enc = goal_encoder(cfg)
+    k_sac, k_env, k_run = jax.random.split(key, 3)
+    sac_state = sac.init_sac(k_sac, cfg.scene.latent_dim, enc.goal_dim, env.action_size, cfg.sac)
+    buffer = replay.init_buffer(cfg.sac.replay_capacity(cfg.horizon), cfg.horizon,
+                                cfg.scene.image_shape, env.action_size, cfg.scene.latent_dim,
+                                enc.goal_dim)
+    env_state = jax.vmap(env.reset)(jax.random.split(k_env, cfg.n_envs))
+    return TrainState(sac=sac_state, scene_vae=scene_vae, lstm=lstm, buffer=buffer,
+                      env_state=env_state, key=k_run, env_steps=jnp.zeros((), jnp.int32),
+                      epoch=jnp.zeros((), jnp.int32))
+
+
+# ----------------------------------------------------------------------------- pieces
+
+def scene_latents(cfg: TrainConfig, params, images):
+    return encoders.encode_mean(params, cfg.scene, images)
+
+
+def collect_episode(cfg: TrainConfig, env, enc: GoalEncoder, frozen: Frozen, state: TrainState,
+                    key, act_random):
+    """One episode of all E envs -> (env_state, replay.Trajectory [E, ...], metrics)."""
+    k_reset, k_goal, k_act = jax.random.split(key, 3)
+    lstm_params = None if state.lstm is None else state.lstm.params
+    env_state = jax.vmap(env.reset_episode)(state.env_state,
+                                            jax.random.split(k_reset, cfg.n_envs))
+    goals = enc.prior_goals(k_goal, lstm_params, cfg.n_envs)  # Algorithm 1: z_g from the prior
+    rgb0 = jax.vmap(env.render)(env_state)
+    scene_params = state.scene_vae.params
+
+    def step(carry, k):
+        es, rgb = carry
+        z = scene_latents(cfg, scene_params, rgb)
+        k_pol, k_rand = jax.random.split(k)
+        a_pol = sac.select_action(state.sac.policy_params, z, goals, k_pol)
+        a_rand = jax.random.uniform(k_rand, a_pol.shape, minval=-1.0, maxval=1.0)
+        a = jnp.where(act_random, a_rand, a_pol)
+        es = jax.vmap(env.step)(es, a)
+        rgb = jax.vmap(env.render)(es)
+        return (es, rgb), (rgb, a, z)
+
+    (env_state, _), (rgbs, actions, _) = jax.lax.scan(
+        step, (env_state, rgb0), jax.random.split(k_act, cfg.horizon))
+    images = jnp.concatenate([rgb0[None], rgbs], 0).swapaxes(0, 1)  # [E, T+1, H, W, 3]
+    goal_imgs = enc.goal_images(frozen, images)
+    frame_lat = enc.frame_latents(frozen, scene_params, goal_imgs)
+    achieved = jax.vmap(lambda f: enc.sequence(lstm_params, f))(frame_lat)
+    traj = replay.Trajectory(
+        images=images, object_images=goal_imgs, actions=actions.swapaxes(0, 1),
+        obs_latents=scene_latents(cfg, scene_params, images), goal_latents=achieved,
+        rollout_goals=goals)
+    final_dist = jnp.sum(jnp.square(achieved[:, -1] - goals), -1)
+    return env_state, traj, {"rollout_latent_dist": final_dist.mean()}
+
+
+def sac_updates(cfg: TrainConfig, enc: GoalEncoder, state: TrainState, key, n_updates: int):
+    """`n_updates` SAC updates on HER batches (prior goals sampled fresh per batch)."""
+    lstm_params = None if state.lstm is None else state.lstm.params
+
+    def body(s, k):
+        k_goal, k_batch, k_upd = jax.random.split(k, 3)
+        prior = enc.prior_goals(k_goal, lstm_params, cfg.sac.batch_size)
+        batch = replay.sample_transitions(state.buffer, k_batch, cfg.sac.batch_size, prior,
+                                          cfg.sac.goal_fracs)
+        s, m = sac.sac_update(s, k_upd, batch, cfg.sac)
+        m["reward"] = batch.reward.mean()
+        return s, m
+
+    new, metrics = jax.lax.scan(body, state.sac, jax.random.split(key, n_updates))
+    return state.replace(sac=new), jax.tree.map(jnp.mean, metrics)
+
+
+def log_likelihood(cfg: TrainConfig, params, images, key):
+    """Skew-Fit's importance-sampled log p(x) under the VAE (Gaussian identity-variance
+    decoder), with cfg.skew_num_latents samples of q(z|x)."""
+    model = ConvVAE(cfg.scene.latent_dim, cfg.scene.feature_dim, cfg.scene.min_variance)
+    mean, logvar = model.apply(params, images, method=ConvVAE.encode)
+    k = cfg.skew_num_latents
+    eps = jax.random.normal(key, (k,) + mean.shape)
+    z = mean + jnp.exp(0.5 * logvar) * eps  # [K, B, d]
+    recon = model.apply(params, z, method=ConvVAE.decode)
+    x = to_float(images)
+    log_px_z = -0.5 * jnp.sum(jnp.square(recon - x), axis=(-3, -2, -1))
+    log_pz = -0.5 * jnp.sum(jnp.square(z), -1)
+    log_qz = -0.5 * jnp.sum(jnp.square(eps) + logvar, -1)
+    return jax.nn.logsumexp(log_px_z + log_pz - log_qz, axis=0) - math.log(k)
+
+
+def skew_weights(log_p, alpha: float, valid):
+    """Skew-Fit sampling weights p(x)^alpha over the buffer, normalised (log-space; invalid
+    slots get 0)."""
+    logw = jnp.where(valid, alpha * log_p, -jnp.inf)
+    return jax.nn.softmax(logw.reshape(-1)).reshape(log_p.shape)
+
+
+def train_scene_vae(cfg: TrainConfig, state: TrainState, key, n_batches):
+    """`n_batches` scene-VAE steps on replay images drawn with Skew-Fit weights."""
+    buf = state.buffer
+    k_lp, k_train = jax.random.split(key)
+    n, t1 = buf.images.shape[:2]
+    flat = buf.images.reshape((n * t1,) + buf.images.shape[2:])
+    keys = jax.random.split(k_lp, n * t1)
+    log_p = jax.lax.map(lambda xk: log_likelihood(cfg, state.scene_vae.params, xk[0][None],
+                                                  xk[1])[0],
+                        (flat, keys), batch_size=min(256, n * t1)).reshape(n, t1)
+    valid = jnp.broadcast_to((jnp.arange(n) < buf.size)[:, None], (n, t1))
+    weights = skew_weights(log_p, cfg.skew_alpha, valid)
+
+    def body(i, carry):
+        vs, loss = carry
+        k_s, k_step = jax.random.split(jax.random.fold_in(k_train, i))
+        imgs = replay.sample_images(buf, k_s, cfg.vae_online_batch, weights)
+        vs, m = encoders.vae_train_step(vs, k_step, imgs, cfg.scene)
+        return vs, loss + m["loss"]
+
+    vs, loss_sum = jax.lax.fori_loop(0, n_batches, body, (state.scene_vae, jnp.float32(0)))
+    return state.replace(scene_vae=vs), {"vae_loss": loss_sum / jnp.maximum(n_batches, 1)}
+
+
+def train_lstm(cfg: TrainConfig, enc: GoalEncoder, frozen: Frozen, state: TrainState, key,
+               n_batches):
+    """`n_batches` online LSTM steps on trajectories drawn uniformly from the buffer: the
+    auto-encoder loss, plus the matching loss unless ablated."""
+    frame_cfg = enc.object_cfg or enc.scene_cfg
+
+    def frame_params(s):
+        return frozen.object_vae if enc.object_cfg is not None else s.scene_vae.params
+
+    def body(i, carry):
+        s, loss = carry
+        k_s, k_occ, k_step = jax.random.split(jax.random.fold_in(key, i), 3)
+        tr = replay.sample_trajectories(s.buffer, k_s, cfg.lstm.online_batch_size)
+        lat = encoders.encode_mean(frame_params(s), frame_cfg, tr.object_images)
+        occ = None
+        if cfg.matching_loss:
+            occ = encoders.make_occlusion(k_occ, frame_params(s), frame_cfg, tr.object_images,
+                                          cfg.lstm)
+        ls, m = encoders.lstm_train_step(s.lstm, k_step, lat, cfg.lstm, occ)
+        return s.replace(lstm=ls), loss + m["loss"]
+
+    state, loss_sum = jax.lax.fori_loop(0, n_batches, body, (state, jnp.float32(0)))
+    return state, {"lstm_loss": loss_sum / jnp.maximum(n_batches, 1)}
+
+
+def refresh(cfg: TrainConfig, enc: GoalEncoder, frozen: Frozen, state: TrainState):
+    """Recompute the cached scene and goal latents of the whole buffer."""
+    lstm_params = None if state.lstm is None else state.lstm.params
+    scene_params = state.scene_vae.params
+    buf = replay.refresh_latents(
+        state.buffer,
+        lambda imgs: scene_latents(cfg, scene_params, imgs),
+        lambda gimgs: enc.sequence(lstm_params, enc.frame_latents(frozen, scene_params, gimgs)),
+        chunk=64)
+    return state.replace(buffer=buf)
+
+
+# ----------------------------------------------------------------------------- the chunk
+
+def make_chunk(cfg: TrainConfig, env):
+    """chunk(state, frozen, plan) -> (state, metrics) for ONE seed; the caller vmaps over seeds
+    (frozen and plan un-batched) and jits."""
+    enc = goal_encoder(cfg)
+    n_updates = cfg.epoch_env_steps * cfg.sac.updates_per_step
+
+    def chunk(state: TrainState, frozen: Frozen, plan: ChunkPlan):
+        TRACE_COUNTS["chunk"] += 1
+        key, k_col, k_sac, k_vae, k_lstm = jax.random.split(state.key, 5)
+
+        def episode(s, k):
+            es, traj, m = collect_episode(cfg, env, enc, frozen, s, k, plan.act_random)
+            s = s.replace(env_state=es, buffer=replay.add_trajectories(s.buffer, traj),
+                          env_steps=s.env_steps + cfg.n_envs * cfg.horizon)
+            return s, m
+
+        state, col_m = jax.lax.scan(episode, state,
+                                    jax.random.split(k_col, cfg.episodes_per_epoch))
+        metrics = jax.tree.map(jnp.mean, col_m)
+
+        zero_sac = jax.tree.map(jnp.zeros_like, jax.eval_shape(
+            lambda s: sac_updates(cfg, enc, s, k_sac, 1)[1], state))
+        state, sac_m = jax.lax.cond(plan.learn,
+                                    lambda s: sac_updates(cfg, enc, s, k_sac, n_updates),
+                                    lambda s: (s, zero_sac), state)
+        metrics.update(sac_m)
+
+        state, vae_m = jax.lax.cond(plan.vae_batches > 0,
+                                    lambda s: train_scene_vae(cfg, s, k_vae, plan.vae_batches),
+                                    lambda s: (s, {"vae_loss": jnp.float32(0)}), state)
+        metrics.update(vae_m)
+        if enc.lstm:
+            state, lstm_m = jax.lax.cond(
+                plan.lstm_batches > 0,
+                lambda s: train_lstm(cfg, enc, frozen, s, k_lstm, plan.lstm_batches),
+                lambda s: (s, {"lstm_loss": jnp.float32(0)}), state)
+            metrics.update(lstm_m)
+        state = jax.lax.cond((plan.vae_batches > 0) | (plan.lstm_batches > 0),
+                             lambda s: refresh(cfg, enc, frozen, s), lambda s: s, state)
+        state = state.replace(key=key, epoch=state.epoch + 1)
+        return state, metrics
+
+    return chunk
+
+
+def compile_chunk(cfg: TrainConfig, env):
+    """jit(vmap(chunk)) over seeds, state donated."""
+    chunk = make_chunk(cfg, env)
+    return jax.jit(jax.vmap(chunk, in_axes=(0, None, None)), donate_argnums=0)
+
+
+# ----------------------------------------------------------------------------- evaluation
+
+def make_evaluate(cfg: TrainConfig, env):
+    """evaluate(state, frozen, key) -> dict for ONE seed: `n_eval_goals` test goals sampled
+    from the task's goal space, rendered, segmented and encoded; the deterministic policy runs
+    one episode from a reset per goal; metric = the task's goal_distance at the final step."""
+    enc = goal_encoder(cfg)
+
+    def evaluate(state: TrainState, frozen: Frozen, key):
+        k_goal, k_reset = jax.random.split(key)
+        n = cfg.n_eval_goals
+        goal_states = jax.vmap(env.sample_goal)(jax.random.split(k_goal, n))
+        goal_rgb = jax.vmap(env.render)(goal_states)
+        lstm_params = None if state.lstm is None else state.lstm.params
+        scene_params = state.scene_vae.params
+        g_lat = enc.single(lstm_params, enc.frame_latents(
+            frozen, scene_params, enc.goal_images(frozen, goal_rgb)))
+        es = jax.vmap(env.reset)(jax.random.split(k_reset, n))
+
+        def step(es, _):
+            rgb = jax.vmap(env.render)(es)
+            z = scene_latents(cfg, scene_params, rgb)
+            a = sac.select_action(state.sac.policy_params, z, g_lat, None, deterministic=True)
+            es = jax.vmap(env.step)(es, a)
+            return es, rgb[0]
+
+        es, frames = jax.lax.scan(step, es, None, length=cfg.horizon)
+        final = jax.vmap(env.render)(es)[0]
+        dist = jax.vmap(env.goal_distance)(es, goal_states)
+        return {"final_distance": dist.mean(), "final_distance_median": jnp.median(dist),
+                    "distances": dist, "video": jnp.concatenate([frames, final[None]], 0),
+                    "goal_image": goal_rgb[0]}
+
+    return evaluate
+

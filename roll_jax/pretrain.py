@@ -1,0 +1,241 @@
+"""Pre-training of the scene-VAE, the object-VAE and the LSTM (Algorithm 1, first lines;
+appendix "Training schedules").
+
+    python -m roll_jax.pretrain --task TASK [--preset smoke|paper] --out DIR [--seg DIR]
+
+- scene data: `n_pretrain_images` frames of a random policy (whole episodes from resets);
+- object data: as many frames with the object (and the hand) placed at random, segmented
+  with `segment` (never with ground-truth labels);
+- scene-VAE: beta-VAE loss; object-VAE: + the VAE matching loss; LSTM: auto-encoder loss on
+  sequences of object-VAE latents drawn from the object data (the paper pre-trains it "on the
+  same dataset"; the frames are independent placements, so a sequence is a random draw of
+  `horizon` of them);
+- one jitted epoch function per model (a lax.scan over its batches), orbax checkpoints,
+  a progress bar, reconstruction grids as PNG.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+
+import jax
+import numpy as np
+from flax import struct
+
+from configs.train import TrainConfig
+from roll_jax import encoders
+from roll_jax.agent import goal_encoder
+from roll_jax.segmentation import pipeline
+
+CHECKPOINT_VERSION = 1
+
+
+@struct.dataclass
+class Pretrained:
+    scene_vae: encoders.VAEState
+    object_vae: encoders.VAEState | None
+    lstm: encoders.LSTMState | None
+
+
+def scene_dataset(env, key, n_images: int) -> jax.Array:
+    """uint8 [n, 48, 48, 3]: random-policy episodes from resets (frames after each step)."""
+    from envs_mjx.rollout import random_actions, rollout
+
+    n_eps = -(-n_images // env.horizon)
+
+    def one(k):
+        k_r, k_a = jax.random.split(k)
+        _, traj = rollout(env, env.reset(k_r), random_actions(k_a, env.horizon, env.action_size),
+                          render=True)
+        return traj.rgb
+
+    rgb = jax.jit(jax.vmap(one))(jax.random.split(key, n_eps))
+    return rgb.reshape((-1,) + rgb.shape[2:])[:n_images]
+
+
+def object_dataset(env, seg_params, key, n_images: int):
+    """(segmented images uint8 [n, 48, 48, 3], object masks bool [n, 48, 48]) of random object
+    placements, masks from `segment`."""
+    rgb, _ = pipeline.random_object_states(env, key, n_images)
+    masks = jax.jit(pipeline.segment)(seg_params, rgb)
+    return pipeline.segmented_image(rgb, masks), masks
+
+
+def _fit_vae(key, cfg, data, masks, desc, progress: bool):
+    from tqdm import tqdm
+
+    state = encoders.init_vae(key, cfg)
+    epoch = jax.jit(encoders.vae_fit_epoch, static_argnames="cfg")
+    losses = []
+    bar = tqdm(range(cfg.epochs), desc=desc, unit="epoch", disable=not progress)
+    for e in bar:
+        state, m = epoch(state, jax.random.fold_in(key, e + 1), data, cfg, masks)
+        losses.append(float(m["loss"].mean()))
+        if not np.isfinite(losses[-1]):
+            raise FloatingPointError(f"{desc}: loss is {losses[-1]} at epoch {e}")
+        bar.set_postfix(loss=f"{losses[-1]:.2f}")
+    return state, losses
+
+
+def _fit_lstm(key, cfg, in_dim, latents, horizon, desc, progress: bool):
+    from tqdm import tqdm
+
+    state = encoders.init_lstm(key, cfg, in_dim)
+    epoch = jax.jit(encoders.lstm_fit_epoch, static_argnames=("cfg", "batches"))
+    n = latents.shape[0]
+    losses = []
+    bar = tqdm(range(cfg.epochs), desc=desc, unit="epoch", disable=not progress)
+    for e in bar:
+        k_seq, k_ep = jax.random.split(jax.random.fold_in(key, e + 1))
+        # A fresh set of random sequences each epoch (enough for the epoch's batches).
+        idx = jax.random.randint(k_seq, (cfg.batch_size * 4, horizon), 0, n)
+        state, m = epoch(state, k_ep, latents[idx], cfg)
+        losses.append(float(m["loss"].mean()))
+        if not np.isfinite(losses[-1]):
+            raise FloatingPointError(f"{desc}: loss is {losses[-1]} at epoch {e}")
+        bar.set_postfix(loss=f"{losses[-1]:.4f}")
+    return state, losses
+
+
+def pretrain(cfg: TrainConfig, env, seg_params, key, progress: bool = True):
+    """Returns (Pretrained, info) with datasets and loss histories for figures and tests."""
+    enc = goal_encoder(cfg)
+    k_sd, k_od, k_s, k_o, k_l = jax.random.split(key, 5)
+    info = {}
+    scene_data = scene_dataset(env, k_sd, cfg.scene.n_pretrain_images)
+    scene, info["scene_loss"] = _fit_vae(k_s, cfg.scene, scene_data, None, "scene-VAE", progress)
+    info["scene_data"] = scene_data
+    obj_state = lstm_state = None
+    frame_params, frame_cfg, frame_data = scene.params, cfg.scene, scene_data
+    if enc.object_cfg is not None:
+        obj_data, obj_masks = object_dataset(env, seg_params, k_od, enc.object_cfg.n_pretrain_images)
+        obj_state, info["object_loss"] = _fit_vae(k_o, enc.object_cfg, obj_data, obj_masks,
+                                                  "object-VAE", progress)
+        info["object_data"] = obj_data
+        frame_params, frame_cfg, frame_data = obj_state.params, enc.object_cfg, obj_data
+    if enc.lstm:
+        lat = jax.jit(encoders.encode_mean, static_argnames="cfg")(frame_params, frame_cfg,
+                                                                    frame_data)
+        lcfg = cfg.lstm
+        lstm_state, info["lstm_loss"] = _fit_lstm(k_l, lcfg, enc.frame_dim, lat, cfg.horizon,
+                                                  "LSTM", progress)
+    return Pretrained(scene_vae=scene, object_vae=obj_state, lstm=lstm_state), info
+
+
+# ----------------------------------------------------------------------------- files
+
+def recon_grid(params, cfg, images, path: str, n: int = 8) -> None:
+    """Originals (top row) and reconstructions (bottom row) as a PNG, 4x upscaled."""
+    import cv2
+
+    x = images[:n]
+    mean = encoders.encode_mean(params, cfg, x)
+    rec = (np.asarray(encoders.decode(params, cfg, mean)) * 255).round().astype(np.uint8)
+    grid = np.concatenate([np.concatenate(list(np.asarray(x)), 1), np.concatenate(list(rec), 1)], 0)
+    grid = cv2.resize(grid, (grid.shape[1] * 4, grid.shape[0] * 4), interpolation=cv2.INTER_NEAREST)
+    cv2.imwrite(path, grid[..., ::-1])
+
+
+def _meta(cfg: TrainConfig) -> dict:
+    enc = goal_encoder(cfg)
+    return {"version": CHECKPOINT_VERSION, "task": cfg.task, "algo": cfg.algo,
+                "image_shape": list(cfg.scene.image_shape), "scene_latent": cfg.scene.latent_dim,
+                "object_latent": None if enc.object_cfg is None else enc.object_cfg.latent_dim,
+                "lstm": enc.lstm}
+
+
+def save(path: str, cfg: TrainConfig, pre: Pretrained) -> None:
+    import orbax.checkpoint as ocp
+
+    path = os.path.abspath(path)
+    os.makedirs(path, exist_ok=True)
+    with ocp.StandardCheckpointer() as ck:
+        ck.save(os.path.join(path, "encoders"), pre, force=True)
+    with open(os.path.join(path, "meta.json"), "w") as f:
+        json.dump(_meta(cfg), f, indent=2)
+
+
+def _abstract(cfg: TrainConfig) -> Pretrained:
+    enc = goal_encoder(cfg)
+    key = jax.random.PRNGKey(0)
+    return jax.eval_shape(lambda: Pretrained(
+        scene_vae=encoders.init_vae(key, cfg.scene),
+        object_vae=None if enc.object_cfg is None else encoders.init_vae(key, enc.object_cfg),
+        lstm=encoders.init_lstm(key, cfg.lstm, enc.frame_dim) if enc.lstm else None))
+
+
+def load(path: str, cfg: TrainConfig) -> Pretrained:
+    """Restore; refuses a checkpoint for another task, image size or latent size."""
+    import orbax.checkpoint as ocp
+
+    path = os.path.abspath(path)
+    meta_path = os.path.join(path, "meta.json")
+    if not os.path.exists(meta_path):
+        raise FileNotFoundError(f"no encoder checkpoint at {path} (missing meta.json)")
+    with open(meta_path) as f:
+        meta = json.load(f)
+    want = _meta(cfg)
+    for k in ("task", "image_shape", "scene_latent", "object_latent", "lstm"):
+        if meta.get(k) != want[k]:
+            raise ValueError(f"encoder checkpoint {path} has {k}={meta.get(k)!r}, but this run "
+                             f"needs {k}={want[k]!r}")
+    with ocp.StandardCheckpointer() as ck:
+        return ck.restore(os.path.join(path, "encoders"), _abstract(cfg))
+
+
+def main(argv=None):
+    from configs.train import PRESETS, TASKS, make_config
+
+    p = argparse.ArgumentParser(prog="python -m roll_jax.pretrain", description=__doc__,
+                                formatter_class=argparse.RawTextHelpFormatter)
+    p.add_argument("--task", required=True)
+    p.add_argument("--preset", default="paper")
+    p.add_argument("--algo", default="roll")
+    p.add_argument("--out", required=True)
+    p.add_argument("--seg", default=None, help="segmentation checkpoint dir (fitted if absent)")
+    p.add_argument("--seed", type=int, default=0)
+    a = p.parse_args(argv)
+    if a.task not in TASKS:
+        p.error(f"unknown --task {a.task!r}; expected one of {', '.join(TASKS)}")
+    if a.preset not in PRESETS:
+        p.error(f"unknown --preset {a.preset!r}; expected one of {', '.join(PRESETS)}")
+    try:
+        cfg = make_config(a.task, a.algo, a.preset)
+    except ValueError as e:
+        sys.exit(f"error: {e}")
+    import envs_mjx
+
+    env = envs_mjx.make(a.task)
+    key = jax.random.PRNGKey(a.seed)
+    seg = None
+    if goal_encoder(cfg).segment:
+        seg = fit_or_load_segmentation(cfg, env, a.seg or os.path.join(a.out, "segmentation"),
+                                       jax.random.fold_in(key, 1))
+    pre, info = pretrain(cfg, env, seg, key)
+    save(os.path.join(a.out, "encoders"), cfg, pre)
+    recon_grid(pre.scene_vae.params, cfg.scene, info["scene_data"],
+               os.path.join(a.out, "recon_scene.png"))
+    if pre.object_vae is not None:
+        recon_grid(pre.object_vae.params, cfg.object_vae, info["object_data"],
+                   os.path.join(a.out, "recon_object.png"))
+    summary = {k: [v[0], v[-1]] for k, v in info.items() if k.endswith("_loss")}
+    with open(os.path.join(a.out, "pretrain.json"), "w") as f:
+        json.dump({"task": a.task, "preset": a.preset, "loss_first_last": summary}, f, indent=2)
+    print(json.dumps(summary, indent=2))
+
+
+def fit_or_load_segmentation(cfg: TrainConfig, env, path: str, key):
+    """Load the task's segmentation from `path`, or fit it there first."""
+    if os.path.exists(os.path.join(path, "meta.json")):
+        params, _ = pipeline.load(path, cfg.task)
+        return params
+    params, _ = pipeline.fit(env, key, cfg.segmentation)
+    pipeline.save(path, cfg.task, params, cfg.segmentation)
+    return params
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,222 @@
+"""The training driver: segmentation -> pre-training -> chunks of the compiled loop.
+
+`run(cfg, out, ...)` is what `train.py` calls. Between chunks, Python evaluates, logs
+metrics.csv, checkpoints (orbax, the whole train state including the replay buffer), plots the
+learning curve and drives the progress bar. Seeds are the leading vmapped axis of the state.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import os
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from configs.train import TrainConfig
+from roll_jax import loop, pretrain
+from roll_jax.agent import Frozen, goal_encoder
+
+METRIC_KEYS = ("q_loss", "policy_loss", "alpha", "alpha_loss", "entropy", "q_mean", "reward",
+               "vae_loss", "lstm_loss", "rollout_latent_dist")
+LOSS_KEYS = ("q_loss", "policy_loss", "alpha_loss", "vae_loss", "lstm_loss")
+
+
+class TrainingDiverged(RuntimeError):
+    pass
+
+
+def _config_json(cfg: TrainConfig) -> dict:
+    return json.loads(json.dumps(dataclasses.asdict(cfg)))
+
+
+def check_resume(out: str, cfg: TrainConfig) -> None:
+    """A resumed run must have the same config as the command line (before any compile)."""
+    path = os.path.join(out, "config.json")
+    if not os.path.exists(path):
+        raise ValueError(f"--resume: no run to resume in {out} (missing config.json)")
+    with open(path) as f:
+        saved = json.load(f)
+    now = _config_json(cfg)
+    diff = [k for k in sorted(set(saved) | set(now)) if saved.get(k) != now.get(k)]
+    if diff:
+        k = diff[0]
+        raise ValueError(f"--resume: config of {out} differs from the command line in {k!r}: "
+                         f"saved {saved.get(k)!r}, now {now.get(k)!r}")
+
+
+def setup(cfg: TrainConfig, env, key, out: str, seg_ckpt=None, enc_ckpt=None, progress=True):
+    """Segmentation and encoders (fitted, or loaded from the given/previous checkpoints)."""
+    enc = goal_encoder(cfg)
+    k_seg, k_pre = jax.random.split(key)
+    seg = None
+    if enc.segment:
+        seg = pretrain.fit_or_load_segmentation(cfg, env, seg_ckpt or os.path.join(out, "segmentation"),
+                                                k_seg)
+    enc_path = enc_ckpt or os.path.join(out, "encoders")
+    if os.path.exists(os.path.join(enc_path, "meta.json")):
+        pre = pretrain.load(enc_path, cfg)
+    else:
+        pre, _ = pretrain.pretrain(cfg, env, seg, k_pre, progress=progress)
+        pretrain.save(enc_path, cfg, pre)
+    frozen = Frozen(seg=seg, object_vae=None if pre.object_vae is None else pre.object_vae.params)
+    return frozen, pre
+
+
+def init_seeds(cfg: TrainConfig, env, key, pre: pretrain.Pretrained) -> loop.TrainState:
+    """[seeds]-batched train state; every seed starts from the same pre-trained encoders."""
+    keys = jax.random.split(key, cfg.seeds)
+    return jax.jit(jax.vmap(lambda k: loop.init_state(k, cfg, env, pre.scene_vae, pre.lstm)))(keys)
+
+
+def _manager(out: str, cfg: TrainConfig):
+    import orbax.checkpoint as ocp
+
+    return ocp.CheckpointManager(
+        os.path.abspath(os.path.join(out, "ckpt")),
+        options=ocp.CheckpointManagerOptions(max_to_keep=cfg.keep_checkpoints, create=True))
+
+
+def _saveable(state) -> dict:
+    """The state's leaves by flat index, without zero-size arrays (MJX data has some; orbax
+    refuses them); `_unsaveable` rebuilds them from the abstract state."""
+    return {str(i): x for i, x in enumerate(jax.tree.leaves(state)) if x.size}
+
+
+def _unsaveable(abstract, saved: dict):
+    leaves, treedef = jax.tree.flatten(abstract)
+    out = [saved[str(i)] if x.size else np.zeros(x.shape, x.dtype) for i, x in enumerate(leaves)]
+    return jax.tree.unflatten(treedef, [jnp.asarray(x) for x in out])
+
+
+def _save(mgr, epoch: int, state) -> None:
+    import orbax.checkpoint as ocp
+
+    mgr.save(epoch, args=ocp.args.StandardSave(_saveable(state)))
+
+
+def _restore(mgr, abstract):
+    import orbax.checkpoint as ocp
+
+    step = mgr.latest_step()
+    saved = mgr.restore(step, args=ocp.args.StandardRestore(_saveable(abstract)))
+    return step, _unsaveable(abstract, saved)
+
+
+def write_gif(path: str, video, goal) -> None:
+    """Observation (left) beside the goal image (right), 4x upscaled, as an animated GIF."""
+    from PIL import Image
+
+    frames = []
+    for f in np.asarray(video):
+        pair = np.concatenate([f, np.full((f.shape[0], 2, 3), 255, np.uint8), np.asarray(goal)], 1)
+        frames.append(Image.fromarray(pair).resize((pair.shape[1] * 4, pair.shape[0] * 4),
+                                                   Image.NEAREST))
+    frames[0].save(path, save_all=True, append_images=frames[1:], duration=80, loop=0)
+
+
+def learning_curve(rows: list[dict], path: str, title: str) -> None:
+    """Median over seeds with the 25-75% band (the paper's Fig. 4 style)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    steps = sorted({r["env_steps"] for r in rows})
+    vals = [[r["final_distance"] for r in rows if r["env_steps"] == s] for s in steps]
+    med = [np.median(v) for v in vals]
+    lo = [np.percentile(v, 25) for v in vals]
+    hi = [np.percentile(v, 75) for v in vals]
+    fig, ax = plt.subplots(figsize=(4.5, 3.2))
+    ax.plot(steps, med, label="median over seeds")
+    ax.fill_between(steps, lo, hi, alpha=0.3, label="25-75%")
+    ax.set_xlabel("env steps")
+    ax.set_ylabel("final distance")
+    ax.set_title(title)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None = None,
+        enc_ckpt: str | None = None, seed: int = 0, progress: bool = True,
+        stop_after_epochs: int | None = None) -> list[dict]:
+    """Train `cfg.seeds` seeds; returns the metrics rows. `stop_after_epochs` ends early (as an
+    interruption would; tests use it for resume)."""
+    from tqdm import tqdm
+
+    import envs_mjx
+
+    if resume:
+        check_resume(out, cfg)
+    os.makedirs(os.path.join(out, "plots"), exist_ok=True)
+    os.makedirs(os.path.join(out, "videos"), exist_ok=True)
+    with open(os.path.join(out, "config.json"), "w") as f:
+        json.dump(_config_json(cfg), f, indent=2)
+
+    env = envs_mjx.make(cfg.task)
+    key = jax.random.PRNGKey(seed)
+    k_setup, k_init, k_eval = jax.random.split(key, 3)
+    frozen, pre = setup(cfg, env, k_setup, out, seg_ckpt, enc_ckpt, progress)
+    state = init_seeds(cfg, env, k_init, pre)
+    mgr = _manager(out, cfg)
+    rows: list[dict] = []
+    csv_path = os.path.join(out, "metrics.csv")
+    start_epoch = 0
+    if resume and mgr.latest_step() is not None:
+        start_epoch, state = _restore(mgr, jax.eval_shape(lambda: state))
+        with open(csv_path) as f:
+            rows = [{k: (float(v) if k not in ("seed",) else int(v)) for k, v in r.items()}
+                    for r in csv.DictReader(f) if float(r["env_steps"]) <= start_epoch * cfg.epoch_env_steps]
+    chunk = loop.compile_chunk(cfg, env)
+    evaluate = jax.jit(jax.vmap(loop.make_evaluate(cfg, env), in_axes=(0, None, 0)))
+
+    end_epoch = cfg.n_epochs if stop_after_epochs is None else min(cfg.n_epochs, stop_after_epochs)
+    bar = tqdm(range(start_epoch, end_epoch), desc=f"{cfg.task} {cfg.algo}", unit="epoch",
+               disable=not progress, initial=start_epoch, total=cfg.n_epochs)
+    t_last, steps_last = time.perf_counter(), start_epoch * cfg.epoch_env_steps
+    for epoch in bar:
+        plan = loop.plan_chunk(cfg, epoch)
+        state, metrics = chunk(state, frozen, plan)
+        metrics = jax.device_get(metrics)
+        env_steps = (epoch + 1) * cfg.epoch_env_steps
+        for k in LOSS_KEYS:
+            if k in metrics and not np.all(np.isfinite(metrics[k])):
+                bad = int(np.argmax(~np.isfinite(metrics[k])))
+                raise TrainingDiverged(
+                    f"{k} is {metrics[k][bad]} for seed {bad} at env step {env_steps} (epoch "
+                    f"{epoch}); the last good checkpoint in {os.path.join(out, 'ckpt')} is kept")
+        if (epoch + 1) % cfg.eval_every_epochs == 0 or epoch + 1 == cfg.n_epochs:
+            ev = jax.device_get(evaluate(state, frozen, jax.random.split(
+                jax.random.fold_in(k_eval, epoch), cfg.seeds)))
+            for s in range(cfg.seeds):
+                row = {"env_steps": env_steps, "seed": s,
+                           "final_distance": float(ev["final_distance"][s]),
+                           "final_distance_median": float(ev["final_distance_median"][s])}
+                row.update({k: float(metrics[k][s]) for k in METRIC_KEYS if k in metrics})
+                rows.append(row)
+            write_gif(os.path.join(out, "videos", f"eval_{env_steps:08d}.gif"),
+                      ev["video"][0], ev["goal_image"][0])
+            with open(csv_path, "w", newline="") as f:
+                w = csv.DictWriter(f, fieldnames=list(rows[0]))
+                w.writeheader()
+                w.writerows(rows)
+            learning_curve(rows, os.path.join(out, "plots", "learning_curve.png"),
+                           f"{cfg.task} ({cfg.algo}, {cfg.seeds} seeds)")
+            _save(mgr, epoch + 1, state)
+            now = time.perf_counter()
+            rate = (env_steps - steps_last) * cfg.seeds / max(now - t_last, 1e-9)
+            t_last, steps_last = now, env_steps
+            bar.set_postfix(dist=f"{np.median(ev['final_distance']):.3f}",
+                            sps=f"{rate:.0f}")
+    mgr.wait_until_finished()
+    mgr.close()
+    return rows
+
+
+
