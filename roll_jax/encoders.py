@@ -29,7 +29,6 @@ from roll_jax.models import (
     ConvVAE,
     LSTMEncoder,
     check_images,
-    init_key,
     init_lstm_params,
 )
 
@@ -80,11 +79,12 @@ def _adam(lr: float) -> optax.GradientTransformation:
 # --- VAE --------------------------------------------------------------------------------------
 
 # Jitted on the module (not the config), so configs that differ only in loss weights or
-# schedules share one compiled init; the whole state in one jit because op-by-op optimizer
-# init costs a compile per parameter shape.
+# schedules share one compiled init; the whole state in one jit because op-by-op init costs a
+# compile per parameter shape. (Threefry keys are kept although XLA's "rbg" generator compiles
+# this init ~3x faster on CPU: rbg gives other parameters under vmap and across backends, so
+# seed i of a vmapped run would not equal the same seed run alone.)
 @functools.partial(jax.jit, static_argnums=(1, 2, 3))
 def _init_vae(key: jax.Array, model: ConvVAE, image_shape: tuple[int, ...], lr: float) -> VAEState:
-    key = init_key(key)
     params = model.init(key, jnp.zeros((1,) + image_shape, jnp.uint8), key)
     return VAEState(params=params, opt_state=_adam(lr).init(params), step=jnp.zeros((), jnp.int32))
 

@@ -145,6 +145,17 @@ def test_lstm_shapes(lstm):
     assert jax.eval_shape(lstm_encode, state.params, jnp.zeros((7, 6))).shape == (7, cfg.out_dim)
 
 
+def test_lstm_init_vmaps_over_seeds():
+    # Seeds are a vmapped axis of the train state: seed i of a batch must equal seed i alone.
+    # (Regression: flax's orthogonal LSTM init deadlocked XLA:CPU under jit(vmap).)
+    cfg = lstm_config("pickup")
+    keys = jax.random.split(jax.random.key(0), 2)
+    batched = jax.jit(jax.vmap(lambda k: encoders.init_lstm(k, cfg, 6)))(keys)
+    single = encoders.init_lstm(keys[1], cfg, 6)
+    for a, b in zip(jax.tree.leaves(batched), jax.tree.leaves(single)):
+        np.testing.assert_array_equal(a[1], b)
+
+
 def test_lstm_resets_match_python_loop(lstm):
     model, params = lstm
     seq = jax.random.normal(jax.random.key(2), (8, 4))
