@@ -21,6 +21,7 @@ L^ae = ||z_t^s - z^hat_t^s||^2 makes the LSTM output reconstruct its *input late
 "decoder" and its output z_t^s is the final object encoding (reward, goals). The module is
 one step, `(carry, x) -> (carry, z)`; `lstm_encode` scans it over a sequence, zeroing the
 carry where `resets` is set (episode starts), so one call can span several episodes.
+Weights use torch.nn.LSTM's U(-1/sqrt(hidden), 1/sqrt(hidden)) init (reference code).
 """
 
 from __future__ import annotations
