@@ -1,4 +1,6 @@
 """Segmentation benchmarks. MOG2 part: jnp MOG2 vs cv2 MOG2 speed, and long-video parity.
+Segment part (--part segment): U-Net inference and the full `segment` (MOG2 foreground at
+lr 0 AND NOT U-Net robot) in images/s at batch 1, 64, 1024, U-Net width from the paper config.
 
 Writes bench/results/segmentation.json, keys "mog2" (frames/s at batch 1, 64, 1024 of
 independent 48x48x3 models, ratio against cv2 measured in the same run) and "mog2_parity"
@@ -19,11 +21,11 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-import cv2  # noqa: E402
-import jax  # noqa: E402
+import cv2
+import jax
 
-from roll_jax.segmentation import mog2  # noqa: E402
-from roll_jax.segmentation import mog2_parity as mp  # noqa: E402
+from roll_jax.segmentation import mog2
+from roll_jax.segmentation import mog2_parity as mp
 
 H = W = 48
 C = 3
@@ -143,15 +145,58 @@ def parity_mog2(fit=2000, test=300, kinds=("mixed", "shadows", "flicker", "multi
             "min": min(r["min"] for r in runs), "mean": float(np.mean([r["mean"] for r in runs]))}
 
 
+def _rate(fn, *args, reps: int = 3) -> float:
+    """Best-of-`reps` calls per second (after one warm-up call that compiles)."""
+    jax.block_until_ready(fn(*args))
+    best = float("inf")
+    for _ in range(reps):
+        t0 = time.perf_counter()
+        jax.block_until_ready(fn(*args))
+        best = min(best, time.perf_counter() - t0)
+    return 1.0 / best
+
+
+def bench_segment(batches=(1, 64, 1024)) -> dict:
+    """U-Net inference and full `segment` throughput (weights do not change the speed, so a
+    fresh U-Net and a MOG2 fitted on a synthetic video stand in for a fitted pipeline)."""
+    from configs.segmentation import SegmentationConfig
+    from roll_jax.segmentation import pipeline, unet
+
+    cfg = SegmentationConfig()
+    video = mp.synthetic_video("mixed", t=300, h=H, w=W, c=C, seed=0)
+    bg, _ = mog2.apply_video(mog2.init(H, W, C, history=300), jax.device_put(video))
+    params = pipeline.SegParams(background=bg,
+                                unet=unet.init_unet(jax.random.PRNGKey(0), cfg.unet_features, H, W),
+                                robot_threshold=jax.numpy.float32(0.5))
+    seg = jax.jit(pipeline.segment)
+    prob = jax.jit(unet.robot_probability)
+    out = {"unet_features": cfg.unet_features, "jax_backend": jax.default_backend(),
+           "jax_device": str(jax.devices()[0]), "load_average_at_start": os.getloadavg()[0],
+           "batches": {}}
+    for b in batches:
+        imgs = jax.device_put(video[np.arange(b) % len(video)])
+        u = b * _rate(prob, params.unet, imgs)
+        s = b * _rate(seg, params, imgs)
+        out["batches"][str(b)] = {"unet_images_per_s": u, "segment_images_per_s": s}
+        print(f"segment batch {b:5d}: U-Net {u:9.0f} images/s  segment {s:9.0f} images/s",
+              flush=True)
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="small batches and short videos")
+    ap.add_argument("--part", choices=("all", "mog2", "segment"), default="all")
     args = ap.parse_args()
     results = {}
     if os.path.exists(RESULTS):
         with open(RESULTS) as f:
             results = json.load(f)
-    if args.quick:
+    if args.part in ("all", "segment"):
+        results["segment"] = bench_segment((1, 64) if args.quick else (1, 64, 1024))
+    if args.part == "segment":
+        pass
+    elif args.quick:
         results["mog2"] = bench_mog2(batches=(1, 64), warmup=5)
         results["mog2_parity"] = parity_mog2(fit=300, test=50, kinds=("mixed",))
     else:
@@ -160,7 +205,7 @@ def main() -> None:
     os.makedirs(os.path.dirname(RESULTS), exist_ok=True)
     with open(RESULTS, "w") as f:
         json.dump(results, f, indent=2)
-    p = results["mog2_parity"]
+    p = results.get("mog2_parity", {"runs": [], "min": float("nan"), "mean": float("nan")})
     print(f"mog2 parity over {len(p['runs'])} videos: min per-frame agreement {p['min']:.6f}, "
           f"mean {p['mean']:.6f}")
     print("wrote", RESULTS)

@@ -30,6 +30,9 @@ def parse_args(argv=None):
     p.add_argument("--unet-epochs", type=int, default=None, help="override the preset")
     p.add_argument("--n-frames", type=int, default=None, help="override the preset")
     p.add_argument("--robot-threshold", type=float, default=None, help="override the task's")
+    p.add_argument("--unet-features", type=int, default=None, help="override the U-Net width")
+    p.add_argument("--eval-only", action="store_true",
+                   help="re-evaluate the checkpoint in DIR/ckpt instead of fitting")
     a = p.parse_args(argv)
     if a.task not in envs_mjx.TASK_NAMES:
         p.error(f"unknown --task {a.task!r}; expected one of {', '.join(envs_mjx.TASK_NAMES)}")
@@ -50,7 +53,8 @@ def main(argv=None) -> dict:
 
     overrides = {k: v for k, v in {"eval_states": a.eval_states, "unet_epochs": a.unet_epochs,
                                         "n_frames": a.n_frames,
-                                        "robot_threshold": a.robot_threshold}.items()
+                                        "robot_threshold": a.robot_threshold,
+                                        "unet_features": a.unet_features}.items()
                  if v is not None}
     try:
         cfg = segmentation_config(a.task, a.preset, **overrides)
@@ -68,20 +72,26 @@ def main(argv=None) -> dict:
         bar.update(1)
         bar.set_postfix(loss=f"{loss:.4f}")
 
-    params, info = pipeline.fit(env, k_fit, cfg, progress=progress)
-    bar.close()
+    if a.eval_only:
+        bar.close()
+        params, cfg = pipeline.load(os.path.join(a.out, "ckpt"), a.task)
+        if a.robot_threshold is not None:
+            params = params.replace(robot_threshold=np.float32(a.robot_threshold))
+        info = {"unet_loss": [float("nan")], "robot_labels": np.zeros(1)}
+    else:
+        params, info = pipeline.fit(env, k_fit, cfg, progress=progress)
+        bar.close()
+        pipeline.save(os.path.join(a.out, "ckpt"), a.task, params, cfg)
     t_fit = time.perf_counter() - t0
-    pipeline.save(os.path.join(a.out, "ckpt"), a.task, params, cfg)
 
     t1 = time.perf_counter()
     summary, arrays = pipeline.evaluate(env, params, k_eval, cfg.eval_states)
     t_eval = time.perf_counter() - t1
     robot_label_share = float(np.asarray(info["robot_labels"]).mean())
-    summary.update(preset=a.preset, seed=a.seed, fit_seconds=round(t_fit, 1),
+    summary.update(preset=a.preset, seed=a.seed, eval_only=a.eval_only, fit_seconds=round(t_fit, 1),
                    eval_seconds=round(t_eval, 1), n_frames=cfg.n_frames,
                    unet_epochs=cfg.unet_epochs, unet_features=cfg.unet_features,
-                   robot_threshold=cfg.robot_threshold,
-                   unet_loss_first=float(info["unet_loss"][0]),
+                                      unet_loss_first=float(info["unet_loss"][0]),
                    unet_loss_last=float(info["unet_loss"][-1]),
                    robot_label_pixel_share=robot_label_share)
     with open(os.path.join(a.out, "segmentation_eval.json"), "w") as f:

@@ -190,28 +190,45 @@ def mask_scores(pred, labels):
     return {"iou": iou, "robot_leakage": frac(pred, robot), "background_leakage": frac(pred, bg)}
 
 
+THRESHOLD_SWEEP = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7)
+
+
+def _summary(obj, labels) -> tuple[dict, dict]:
+    scores = {k: np.asarray(v) for k, v in mask_scores(jnp.asarray(obj), jnp.asarray(labels)).items()}
+    has_robot = (labels == 1).sum((-2, -1)) > 0
+    pooled = float((obj & (labels == 2)).sum() / max((obj | (labels == 2)).sum(), 1))
+    summary = {"iou": float(scores["iou"].mean()), "iou_median": float(np.median(scores["iou"])),
+               "iou_pooled": pooled,
+               "robot_leakage": float(scores["robot_leakage"][has_robot].mean()),
+               "background_leakage": float(scores["background_leakage"].mean())}
+    return summary, scores
+
+
 def evaluate(env, params: SegParams, key, n_states: int) -> tuple[dict, dict]:
-    """Scores over `n_states` random states whose object is visible; (summary, arrays)."""
+    """Scores over `n_states` random states whose object is visible; (summary, arrays).
+
+    The summary is for the params' robot threshold; `threshold_sweep` repeats the scores for
+    other thresholds (same U-Net probabilities), the data for choosing a task's threshold."""
     rgb, labels = random_object_states(env, key, int(n_states * 1.5) + 8)
     rgb, labels = np.asarray(rgb), np.asarray(labels)
     visible = (labels == 2).sum((-2, -1)) > 0
     rgb, labels = rgb[visible][:n_states], labels[visible][:n_states]
-    fg, robot, obj = jax.jit(masks)(params, jnp.asarray(rgb))
-    scores = {k: np.asarray(v) for k, v in mask_scores(obj, jnp.asarray(labels)).items()}
-    has_robot = (labels == 1).sum((-2, -1)) > 0
-    pooled_iou = float(((np.asarray(obj) & (labels == 2)).sum())
-                       / max(((np.asarray(obj) | (labels == 2)).sum()), 1))
-    summary = {
-        "task": env.name, "n_states": len(rgb),
-        "iou": float(scores["iou"].mean()),
-        "iou_median": float(np.median(scores["iou"])),
-        "iou_pooled": pooled_iou,
-        "robot_leakage": float(scores["robot_leakage"][has_robot].mean()),
-        "background_leakage": float(scores["background_leakage"].mean()),
-        "object_pixels_mean": float((labels == 2).sum((-2, -1)).mean()),
-    }
-    arrays = dict(rgb=rgb, labels=labels, foreground=np.asarray(fg), robot=np.asarray(robot),
-                  object=np.asarray(obj), **scores)
+
+    def probs(p, x):
+        flat_fg = mog2.frozen_foreground(p.background, x)
+        return flat_fg, unet.robot_probability(p.unet, x)
+
+    fg, prob = (np.asarray(a) for a in jax.jit(probs)(params, jnp.asarray(rgb)))
+    robot = prob > float(params.robot_threshold)
+    obj = fg & ~robot
+    summary, scores = _summary(obj, labels)
+    summary = {"task": env.name, "n_states": len(rgb),
+               "robot_threshold": float(params.robot_threshold), **summary,
+               "object_pixels_mean": float((labels == 2).sum((-2, -1)).mean()),
+               "threshold_sweep": {f"{t:.1f}": _summary(fg & ~(prob > t), labels)[0]
+                                   for t in THRESHOLD_SWEEP}}
+    arrays = {"rgb": rgb, "labels": labels, "foreground": fg, "robot": robot, "object": obj,
+              **scores}
     return summary, arrays
 
 
