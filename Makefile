@@ -12,7 +12,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 train: $(STAMP)
-	$(VENV)/bin/python train.py --task puck_push --preset smoke --out runs/puck_push_smoke
+	$(VENV)/bin/python train.py --task puck_push --algo roll --preset smoke --seeds 2 --out runs/puck_push_roll_smoke
 
 test: $(STAMP)
 	$(VENV)/bin/python -m pytest -q

@@ -1,28 +1,31 @@
 """roll-jax command line.
 
-Today this runs the one job the project can do end to end: a random-policy rollout of a
-task's MJX scene, rendered by the JAX renderer, vmapped over envs and seeds, writing the
-frames as PNGs. ROLL training (`--algo roll`) and the Skew-Fit baseline arrive with the
-training issues; asking for them now fails with a clear message instead of pretending.
+    python train.py --task puck_push --algo roll --preset smoke --seeds 2 --out runs/x
+    python train.py ... --resume                 # continue the run in --out exactly
+    python train.py ... --no-matching-loss | --no-lstm | --no-object-vae   (ROLL ablations)
+    python train.py ... --set total_env_steps=20000 sac.batch_size=256    (config overrides)
+    python train.py --algo random ...            # random-policy rollout frames only (viewer)
 
-    python train.py --task puck_push --preset smoke --out runs/puck_push_smoke
+Writes DIR/config.json, DIR/metrics.csv, DIR/ckpt/ (orbax), DIR/plots/learning_curve.png,
+DIR/videos/eval_*.gif, and the fitted DIR/segmentation/ and DIR/encoders/ (reused on resume
+or given with --seg-ckpt / --enc-ckpt).
 """
 
 from __future__ import annotations
 
 import argparse
+import ast
 import dataclasses
 import json
 import os
 import sys
 import time
 
-ALGOS_AVAILABLE = ("random",)
-ALGOS_PLANNED = ("roll", "skewfit")
-PRESETS = {
+ALGOS = ("roll", "skewfit", "random")
+RANDOM_PRESETS = {
     # n_envs per seed, episodes, frame size of the saved video frames
-    "smoke": dict(n_envs=4, episodes=1, video_size=128),
-    "paper": dict(n_envs=64, episodes=4, video_size=128),
+    "smoke": {"n_envs": 4, "episodes": 1, "video_size": 128},
+    "paper": {"n_envs": 64, "episodes": 4, "video_size": 128},
 }
 
 
@@ -38,37 +41,94 @@ class RolloutConfig:
     out: str
 
 
-def parse_args(argv=None) -> RolloutConfig:
+def _parse_overrides(items, p) -> dict:
+    """KEY=VALUE (top-level TrainConfig fields) or GROUP.KEY=VALUE (sac., lstm., scene_vae.,
+    object_vae., segmentation.) -> nested dict of Python literals."""
+    out: dict = {}
+    for item in items:
+        if "=" not in item:
+            p.error(f"--set {item!r}: expected KEY=VALUE")
+        key, raw = item.split("=", 1)
+        try:
+            value = ast.literal_eval(raw)
+        except (ValueError, SyntaxError):
+            value = raw
+        group, _, field = key.rpartition(".")
+        out.setdefault(group, {})[field] = value
+    return out
+
+
+def build_config(a, p):
+    """TrainConfig from parsed args; every error is reported before anything compiles."""
+    from configs.train import TrainConfig, make_config
+
+    over = _parse_overrides(a.set, p)
+    top = dict(over.pop("", {}))
+    top.update(seeds=a.seeds, matching_loss=not a.no_matching_loss, use_lstm=not a.no_lstm,
+               use_object_vae=not a.no_object_vae)
+    try:
+        base = make_config(a.task, a.algo, a.preset)
+        for group, fields in over.items():
+            sub = getattr(base, group, None)
+            if not dataclasses.is_dataclass(sub):
+                p.error(f"--set {group}.*: unknown config group {group!r}")
+            unknown = set(fields) - {f.name for f in dataclasses.fields(sub)}
+            if unknown:
+                p.error(f"--set: unknown field(s) {sorted(unknown)} in {group}")
+            top[group] = dataclasses.replace(sub, **fields)
+        unknown = set(top) - {f.name for f in dataclasses.fields(TrainConfig)}
+        if unknown:
+            p.error(f"--set: unknown config field(s) {sorted(unknown)}")
+        return make_config(a.task, a.algo, a.preset, **top)
+    except (ValueError, TypeError) as e:
+        p.error(str(e))
+
+
+def parse_args(argv=None):
     import envs_mjx
 
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--task", default="puck_push")
-    p.add_argument("--algo", default="random")
+    p.add_argument("--algo", default="roll")
     p.add_argument("--preset", default="smoke")
     p.add_argument("--seeds", type=int, default=1)
-    p.add_argument("--n-envs", type=int, default=None, help="override the preset's envs per seed")
     p.add_argument("--out", default=None)
+    p.add_argument("--resume", action="store_true")
+    p.add_argument("--no-matching-loss", action="store_true")
+    p.add_argument("--no-lstm", action="store_true")
+    p.add_argument("--no-object-vae", action="store_true")
+    p.add_argument("--seg-ckpt", default=None, help="segmentation checkpoint dir to reuse")
+    p.add_argument("--enc-ckpt", default=None, help="pretrained encoders dir to reuse")
+    p.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE")
+    p.add_argument("--seed", type=int, default=0, help="base PRNG seed of the run")
+    p.add_argument("--n-envs", type=int, default=None, help="--algo random: envs per seed")
     a = p.parse_args(argv)
     if a.task not in envs_mjx.TASK_NAMES:
         p.error(f"unknown --task {a.task!r}; expected one of {', '.join(envs_mjx.TASK_NAMES)}")
-    if a.algo in ALGOS_PLANNED:
-        p.error(f"--algo {a.algo!r} is not implemented yet (ROLL training and Skew-Fit are the "
-                f"next issues); available now: {', '.join(ALGOS_AVAILABLE)}")
-    if a.algo not in ALGOS_AVAILABLE:
-        p.error(f"unknown --algo {a.algo!r}; expected one of "
-                f"{', '.join(ALGOS_AVAILABLE + ALGOS_PLANNED)}")
-    if a.preset not in PRESETS:
-        p.error(f"unknown --preset {a.preset!r}; expected one of {', '.join(PRESETS)}")
+    if a.algo not in ALGOS:
+        p.error(f"unknown --algo {a.algo!r}; expected one of {', '.join(ALGOS)}")
+    if a.preset not in RANDOM_PRESETS:
+        p.error(f"unknown --preset {a.preset!r}; expected one of {', '.join(RANDOM_PRESETS)}")
     if a.seeds < 1:
         p.error(f"--seeds must be >= 1, got {a.seeds}")
-    preset = dict(PRESETS[a.preset])
-    if a.n_envs is not None:
-        if a.n_envs < 1:
-            p.error(f"--n-envs must be >= 1, got {a.n_envs}")
-        preset["n_envs"] = a.n_envs
     out = a.out or os.path.join("runs", f"{a.task}_{a.algo}_{a.preset}")
-    return RolloutConfig(task=a.task, algo=a.algo, preset=a.preset, seeds=a.seeds, out=out,
-                         **preset)
+    if a.algo == "random":
+        preset = dict(RANDOM_PRESETS[a.preset])
+        if a.n_envs is not None:
+            if a.n_envs < 1:
+                p.error(f"--n-envs must be >= 1, got {a.n_envs}")
+            preset["n_envs"] = a.n_envs
+        return a, RolloutConfig(task=a.task, algo=a.algo, preset=a.preset, seeds=a.seeds,
+                                out=out, **preset), out
+    cfg = build_config(a, p)
+    if a.resume:
+        from roll_jax.train import check_resume
+
+        try:
+            check_resume(out, cfg)
+        except ValueError as e:
+            p.error(str(e))
+    return a, cfg, out
 
 
 def run_random(cfg: RolloutConfig) -> dict:
@@ -136,12 +196,22 @@ def run_random(cfg: RolloutConfig) -> dict:
 
 
 def main(argv=None) -> int:
-    cfg = parse_args(argv)
-    os.makedirs(cfg.out, exist_ok=True)
-    with open(os.path.join(cfg.out, "config.json"), "w") as f:
-        json.dump(dataclasses.asdict(cfg), f, indent=2)
-    summary = run_random(cfg)
-    print(json.dumps(summary, indent=2))
+    a, cfg, out = parse_args(argv)
+    os.makedirs(out, exist_ok=True)
+    if a.algo == "random":
+        with open(os.path.join(out, "config.json"), "w") as f:
+            json.dump(dataclasses.asdict(cfg), f, indent=2)
+        print(json.dumps(run_random(cfg), indent=2))
+        return 0
+    from roll_jax import train
+
+    t0 = time.time()
+    rows = train.run(cfg, out, resume=a.resume, seg_ckpt=a.seg_ckpt, enc_ckpt=a.enc_ckpt,
+                     seed=a.seed)
+    last = [r for r in rows if r["env_steps"] == rows[-1]["env_steps"]]
+    print(json.dumps({"out": out, "env_steps": rows[-1]["env_steps"], "seeds": cfg.seeds,
+                      "final_distance_per_seed": [r["final_distance"] for r in last],
+                      "wall_s": round(time.time() - t0, 1)}, indent=2))
     return 0
 
 

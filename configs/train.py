@@ -26,7 +26,7 @@ ALGOS = ("roll", "skewfit")
 PRESETS = ("smoke", "paper")
 
 # rlkit vae_schedules (Skew-Fit appendix C.5): epoch -> (train?, batches).
-VAE_SCHEDULES = ("custom_schedule", "custom_schedule_2")
+VAE_SCHEDULES = ("custom_schedule", "custom_schedule_2", "smoke")
 
 
 def vae_schedule(name: str, epoch: int) -> int:
@@ -43,6 +43,8 @@ def vae_schedule(name: str, epoch: int) -> int:
         if epoch < 100:
             return 200
         return 200 if epoch % 2 == 0 else 0
+    if name == "smoke":  # CPU smoke runs: a little training every epoch, same code path
+        return 5
     raise ValueError(f"unknown VAE schedule {name!r}; expected one of {VAE_SCHEDULES}")
 
 
@@ -138,7 +140,7 @@ def _task_module(task: str):
 
 # What the smoke preset shrinks (CPU, minutes); the rest stays at the paper's values.
 SMOKE_TRAIN = {"total_env_steps": 2000, "epoch_env_steps": 500, "eval_every_epochs": 1,
-                   "n_eval_goals": 4}
+               "n_eval_goals": 4, "vae_schedule": "smoke", "skew_num_latents": 2}
 SMOKE_VAE = {"epochs": 20, "batches_per_epoch": 5, "n_pretrain_images": 200}
 SMOKE_LSTM = {"epochs": 10, "batches_per_epoch": 5, "batch_size": 16, "online_batch_size": 4,
                   "online_schedule": ((2**62, 500, 2),)}
