@@ -1,0 +1,192 @@
+"""Encoder benchmarks: training steps/s at the paper's batch sizes and encoding throughput.
+
+- scene-VAE train step, batch 64 (Table 3), beta-VAE loss;
+- object-VAE train step, batch 128 (Table 3), beta-VAE + VAE matching loss (50% drop);
+- LSTM train step, 25 trajectories x T = 50 (online training batch, "Training schedules"),
+  auto-encoder + matching loss, including the synthetic occlusion (`make_occlusion`: drop
+  50% of one frame's object pixels and encode it with the object-VAE), as the training loop
+  runs it; the auto-encoder-only step (pre-training) for comparison;
+- encoding throughput at batch 1024: scene-VAE means; object-VAE means + one LSTM step
+  (`GoalEncoder.single`, how goal images are encoded).
+
+Steps run inside one jitted `lax.scan` of K steps (how pre-training and the training chunk run
+them), timed after a warm-up call, best of a few repeats. Architectures and batch sizes are the
+paper's whatever the machine; latent sizes from hurdle_top (scene 6, object 6).
+
+    python bench/encoders.py [--quick]
+
+Writes bench/results/encoders.json.
+"""
+from __future__ import annotations
+
+import argparse
+import functools
+import json
+import os
+import platform
+import sys
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+import jax
+import jax.numpy as jnp
+
+from configs.encoders import lstm_config, object_vae_config, scene_vae_config
+from roll_jax import encoders
+from roll_jax.agent import GoalEncoder
+from roll_jax.models import lstm_encode
+
+RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "encoders.json")
+TASK = "hurdle_top"
+
+
+def _timeit(fn, *args, repeats: int = 3, min_time: float = 1.0):
+    """(compile+first call seconds, best seconds per call) of a jitted fn."""
+    t0 = time.perf_counter()
+    jax.block_until_ready(fn(*args))
+    first = time.perf_counter() - t0
+    best = float("inf")
+    total, n = 0.0, 0
+    while n < repeats or (total < min_time and n < 20):
+        t0 = time.perf_counter()
+        jax.block_until_ready(fn(*args))
+        dt = time.perf_counter() - t0
+        best, total, n = min(best, dt), total + dt, n + 1
+    return first, best
+
+
+def _images(key, shape, object_like: bool):
+    """uint8 images; object_like: a random disc on black (segmented-image statistics) + mask."""
+    if not object_like:
+        return jax.random.randint(key, shape, 0, 256).astype(jnp.uint8), None
+    lead = shape[:-3]
+    k1, k2 = jax.random.split(key)
+    c = jax.random.uniform(k1, lead + (2,), minval=8, maxval=40)
+    yy, xx = jnp.mgrid[0:48, 0:48]
+    mask = (yy - c[..., 0, None, None]) ** 2 + (xx - c[..., 1, None, None]) ** 2 <= 25
+    colour = jax.random.randint(k2, lead + (1, 1, 3), 50, 256).astype(jnp.uint8)
+    return jnp.where(mask[..., None], colour, 0).astype(jnp.uint8), mask
+
+
+def bench_vae(cfg, k_steps: int, object_like: bool, key) -> dict:
+    state = encoders.init_vae(key, cfg)
+    data, masks = _images(key, (cfg.batch_size,) + cfg.image_shape, object_like)
+
+    @functools.partial(jax.jit, donate_argnums=0)
+    def run(state, key):
+        def body(st, k):
+            st, m = encoders.vae_train_step(st, k, data, cfg, masks)
+            return st, m["loss"]
+        return jax.lax.scan(body, state, jax.random.split(key, k_steps))
+
+    holder = {"s": state}
+
+    def call(k):
+        holder["s"], loss = run(holder["s"], k)
+        return loss
+
+    first, best = _timeit(call, key)
+    return {"batch": cfg.batch_size, "latent_dim": cfg.latent_dim,
+            "matching_loss": cfg.matching_coef > 0, "steps_per_call": k_steps,
+            "steps_per_s": k_steps / best, "images_per_s": k_steps * cfg.batch_size / best,
+            "compile_and_first_call_s": first}
+
+
+def bench_lstm(vcfg, lcfg, batch: int, horizon: int, k_steps: int, matching: bool, key) -> dict:
+    vae = encoders.init_vae(key, vcfg)
+    images, masks = _images(key, (batch, horizon) + vcfg.image_shape, True)
+    latents = encoders.encode_mean(vae.params, vcfg, images)
+    state = encoders.init_lstm(key, lcfg, vcfg.latent_dim)
+
+    @functools.partial(jax.jit, donate_argnums=0)
+    def run(state, key):
+        def body(st, k):
+            k_occ, k_step = jax.random.split(k)
+            occ = (encoders.make_occlusion(k_occ, vae.params, vcfg, images, lcfg, masks)
+                   if matching else None)
+            st, m = encoders.lstm_train_step(st, k_step, latents, lcfg, occ)
+            return st, m["loss"]
+        return jax.lax.scan(body, state, jax.random.split(key, k_steps))
+
+    holder = {"s": state}
+
+    def call(k):
+        holder["s"], loss = run(holder["s"], k)
+        return loss
+
+    first, best = _timeit(call, key)
+    return {"batch_trajectories": batch, "horizon": horizon, "hidden": lcfg.hidden,
+            "layers": lcfg.layers, "matching_loss": matching, "steps_per_call": k_steps,
+            "steps_per_s": k_steps / best, "compile_and_first_call_s": first}
+
+
+def bench_encode(scfg, vcfg, lcfg, batch: int, key) -> dict:
+    scene = encoders.init_vae(key, scfg)
+    obj = encoders.init_vae(jax.random.fold_in(key, 1), vcfg)
+    lstm = encoders.init_lstm(key, lcfg, vcfg.latent_dim)
+    enc = GoalEncoder(scfg, vcfg, segment=False, lstm=True)
+    rgb, _ = _images(key, (batch,) + scfg.image_shape, False)
+    seg, _ = _images(key, (batch,) + vcfg.image_shape, True)
+
+    scene_fn = jax.jit(lambda p, x: encoders.encode_mean(p, scfg, x))
+    obj_fn = jax.jit(lambda p, l, x: enc.single(l, encoders.encode_mean(p, vcfg, x)))
+    # the same images as 1024/50 ~ 20 trajectories through the LSTM (per-step encoding)
+    t_len = 50
+    n_traj = batch // t_len
+    seq = seg[:n_traj * t_len].reshape((n_traj, t_len) + vcfg.image_shape)
+    seq_fn = jax.jit(lambda p, l, x: lstm_encode(l, encoders.encode_mean(p, vcfg, x)))
+    out = {"batch": batch}
+    f, b = _timeit(scene_fn, scene.params, rgb)
+    out["scene_vae_images_per_s"], out["scene_vae_compile_s"] = batch / b, f
+    f, b = _timeit(obj_fn, obj.params, lstm.params, seg)
+    out["object_vae_lstm_single_images_per_s"], out["object_vae_lstm_single_compile_s"] = batch / b, f
+    f, b = _timeit(seq_fn, obj.params, lstm.params, seq)
+    out["object_vae_lstm_sequence_images_per_s"] = n_traj * t_len / b
+    out["object_vae_lstm_sequence_shape"] = [n_traj, t_len]
+    return out
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--quick", action="store_true", help="fewer steps per timed call")
+    p.add_argument("--out", default=RESULTS)
+    a = p.parse_args(argv)
+    k = 5 if a.quick else 10
+    key = jax.random.PRNGKey(0)
+    scfg = scene_vae_config(TASK)
+    vcfg = object_vae_config(TASK)
+    lcfg = lstm_config(TASK)
+    t0 = time.perf_counter()
+    res = {
+        "jax_backend": jax.default_backend(), "jax_device": str(jax.devices()[0]),
+        "device_kind": jax.devices()[0].device_kind, "jax_version": jax.__version__,
+        "cpu": platform.processor() or platform.machine(), "cpu_count": os.cpu_count(),
+        "load_average_at_start": list(os.getloadavg()),
+        "task_configs": TASK,
+        "note": ("steps/s of one jitted lax.scan of K train steps (Adam included), best of "
+                 "repeats after a warm-up call; synthetic data (random images for the scene-VAE, "
+                 "a random disc on black for the object-VAE); the machine was shared with other "
+                 "jobs (see load averages), so CPU figures are lower bounds"),
+    }
+    res["scene_vae_train"] = bench_vae(scfg, k, False, key)
+    print("scene-VAE  ", json.dumps(res["scene_vae_train"]), flush=True)
+    res["object_vae_train"] = bench_vae(vcfg, k, True, key)
+    print("object-VAE ", json.dumps(res["object_vae_train"]), flush=True)
+    res["lstm_train_matching"] = bench_lstm(vcfg, lcfg, lcfg.online_batch_size, 50, k, True, key)
+    print("LSTM+match ", json.dumps(res["lstm_train_matching"]), flush=True)
+    res["lstm_train_ae_only"] = bench_lstm(vcfg, lcfg, lcfg.online_batch_size, 50, k, False, key)
+    print("LSTM ae    ", json.dumps(res["lstm_train_ae_only"]), flush=True)
+    res["encode"] = bench_encode(scfg, vcfg, lcfg, 1024, key)
+    print("encode     ", json.dumps(res["encode"]), flush=True)
+    res["load_average_at_end"] = list(os.getloadavg())
+    res["wall_s"] = time.perf_counter() - t0
+    os.makedirs(os.path.dirname(os.path.abspath(a.out)), exist_ok=True)
+    with open(a.out, "w") as f:
+        json.dump(res, f, indent=2)
+    print(f"wrote {a.out}")
+
+
+if __name__ == "__main__":
+    main()

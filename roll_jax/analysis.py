@@ -1,0 +1,689 @@
+"""The paper's two representation analyses.
+
+1. "Segmented images give a better reward" (paper Figure 5): for N observations and one goal,
+   true object distance (x) against the scene-VAE latent distance and the object latent
+   distance (object-VAE of the segmented image, then one LSTM step from the zero state, the
+   way a goal image is encoded), with the Spearman rank correlation of each.
+
+       python -m roll_jax.analysis latent-vs-distance --task TASK --ckpt DIR [--out DIR]
+
+2. Occlusion retrieval (appendix A "Occlusion analysis"), hurdle_top: puck-moving
+   trajectories; one random frame t >= 1 per trajectory loses 85% of its object pixels; each
+   model encodes that frame (the LSTMs with the trajectory's history), the nearest clean frame
+   in latent space is retrieved from the pool of all clean frames, and the error is the true
+   puck distance between the retrieved frame and the occluded one. Models: (1) LSTM trained
+   with the matching loss, (2) the same LSTM trained without it, (3) the object-VAE alone;
+   all three on the same object-VAE, trained on the same trajectories.
+
+       python -m roll_jax.analysis occlusion --ckpt DIR [--out DIR]
+
+DIR is the output of `python -m roll_jax.pretrain --task TASK --out DIR` (DIR/segmentation,
+DIR/encoders, DIR/pretrain.json); --out defaults to DIR/analysis. JSON keys follow DESIGN.md
+("Evaluation files"): `spearman_object`, `spearman_scene`; `error_cm` = {"lstm_matching":
+[mean, std], "lstm": [...], "vae": [...]}.
+
+The core functions take encoders as plain callables (images -> latents), so tests can feed
+synthetic images and ideal encoders; `model_encoders` and `occlusion_models` build them from
+a checkpoint.
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import json
+import os
+import sys
+from collections.abc import Callable
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from roll_jax import encoders, losses
+from roll_jax.agent import Frozen, GoalEncoder, goal_encoder
+from roll_jax.models import lstm_encode
+
+# Appendix A, Fig. S1(a): estimation error of the occluded puck position (cm).
+PAPER_ERROR_CM = {"lstm_matching": 1.0, "lstm": 2.2, "vae": 3.1}
+OCCLUSION_MODELS = ("lstm_matching", "lstm", "vae")
+OCCLUSION_DROP = 0.85  # Appendix A: "removing 85% of the pixels"
+
+
+# ============================================================================ statistics
+
+def rankdata(x) -> np.ndarray:
+    """Ranks 1..n of a 1-D array, ties get the average of the ranks they span (like
+    scipy.stats.rankdata(method="average"))."""
+    x = np.asarray(x, np.float64).ravel()
+    n = x.size
+    order = np.argsort(x, kind="mergesort")
+    xs = x[order]
+    starts = np.r_[0, np.flatnonzero(np.diff(xs)) + 1]
+    ends = np.r_[starts[1:], n]
+    avg = (starts + ends + 1) / 2.0  # mean of the 1-based ranks starts+1 .. ends
+    ranks = np.empty(n, np.float64)
+    ranks[order] = np.repeat(avg, ends - starts)
+    return ranks
+
+
+def pearson(x, y) -> float:
+    """Pearson correlation; NaN when either input is constant."""
+    x = np.asarray(x, np.float64).ravel()
+    y = np.asarray(y, np.float64).ravel()
+    dx, dy = x - x.mean(), y - y.mean()
+    den = np.sqrt(np.sum(dx * dx) * np.sum(dy * dy))
+    return float(np.sum(dx * dy) / den) if den > 0 else float("nan")
+
+
+def spearman(x, y) -> float:
+    """Spearman rank correlation = Pearson correlation of the (average-tie) ranks."""
+    x = np.asarray(x, np.float64).ravel()
+    y = np.asarray(y, np.float64).ravel()
+    if x.shape != y.shape:
+        raise ValueError(f"spearman: x and y must have the same length, got {x.size} and {y.size}")
+    if x.size < 2:
+        raise ValueError(f"spearman needs at least 2 points, got {x.size}")
+    if not (np.all(np.isfinite(x)) and np.all(np.isfinite(y))):
+        raise ValueError("spearman: inputs must be finite")
+    return pearson(rankdata(x), rankdata(y))
+
+
+# ============================================================================ helpers
+
+def _uniform(key, low, high):
+    low, high = jnp.asarray(low, jnp.float32), jnp.asarray(high, jnp.float32)
+    return low + (high - low) * jax.random.uniform(key, low.shape)
+
+
+def _batched(fn: Callable, x, chunk: int = 512):
+    """fn over the leading axis of x in fixed-size chunks (the last one padded, so fn compiles
+    at most once); returns a numpy array."""
+    x = np.asarray(x)
+    n = x.shape[0]
+    if n <= chunk:
+        return np.asarray(fn(jnp.asarray(x)))
+    out = []
+    for i in range(0, n, chunk):
+        part = x[i:i + chunk]
+        m = part.shape[0]
+        if m < chunk:
+            part = np.concatenate([part, np.repeat(part[-1:], chunk - m, 0)])
+        out.append(np.asarray(fn(jnp.asarray(part)))[:m])
+    return np.concatenate(out)
+
+
+def _units(env) -> tuple[str, float]:
+    """Axis label and scale for the task's object distance."""
+    if env.spec.kind == "door":
+        return "door angle distance (rad)", 1.0
+    return "object distance (cm)", 100.0
+
+
+# ============================================================================ 1. latent vs distance
+
+def observation_set(env, key, n: int):
+    """N observations with the object uniform in its goal space and the hand uniform in its
+    box (kinematic `env.place`, rendered), and one goal from `env.sample_goal`.
+
+    Returns (obs_rgb uint8 [n, 48, 48, 3], goal_rgb uint8 [48, 48, 3], distances [n]) where
+    distances = env.goal_distance(obs, goal) (metres, radians for the door)."""
+    s = env.spec
+    k_goal, k_obs = jax.random.split(key)
+
+    @jax.jit
+    def run(k_goal, keys):
+        goal = env.sample_goal(k_goal)
+
+        def one(k):
+            k_h, k_o = jax.random.split(k)
+            st = env.place(_uniform(k_h, s.hand_low, s.hand_high),
+                           _uniform(k_o, s.object_goal_low, s.object_goal_high))
+            return env.render(st), env.goal_distance(st, goal)
+
+        rgb, dist = jax.vmap(one)(keys)
+        return rgb, env.render(goal), dist
+
+    rgb, goal_rgb, dist = run(k_goal, jax.random.split(k_obs, n))
+    return np.asarray(rgb), np.asarray(goal_rgb), np.asarray(dist)
+
+
+def latent_distances(encode: Callable, obs_rgb, goal_rgb) -> np.ndarray:
+    """||encode(obs) - encode(goal)|| per observation; encode: images [B, ...] -> [B, d]."""
+    z = np.asarray(encode(np.asarray(obs_rgb)), np.float64)
+    zg = np.asarray(encode(np.asarray(goal_rgb)[None]), np.float64)[0]
+    return np.linalg.norm(z - zg, axis=-1)
+
+
+def latent_vs_distance(obs_rgb, goal_rgb, distances, encode_scene: Callable,
+                       encode_object: Callable) -> dict:
+    """Figure 5 data and its Spearman correlations.
+
+    encode_scene / encode_object: uint8 images [B, 48, 48, 3] -> latents [B, d] (the
+    scene-VAE mean of the whole image; the object encoding of the segmented image)."""
+    distances = np.asarray(distances, np.float64)
+    scene = latent_distances(encode_scene, obs_rgb, goal_rgb)
+    obj = latent_distances(encode_object, obs_rgb, goal_rgb)
+    return {
+        "n": int(distances.size),
+        "spearman_object": spearman(distances, obj),
+        "spearman_scene": spearman(distances, scene),
+        "pearson_object": pearson(distances, obj),
+        "pearson_scene": pearson(distances, scene),
+        "object_distance": distances,
+        "object_latent_distance": obj,
+        "scene_latent_distance": scene,
+    }
+
+
+def write_latent_vs_distance(result: dict, out_dir: str, task: str,
+                             x_label: str = "object distance (cm)", x_scale: float = 100.0,
+                             extra: dict | None = None) -> tuple[str, str]:
+    """Scatter plot PNG (both latent distances, each divided by its maximum so they share an
+    axis) and JSON (summary + the plotted arrays). Returns (png, json) paths."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    os.makedirs(out_dir, exist_ok=True)
+    png = os.path.join(out_dir, f"latent_vs_distance_{task}.png")
+    js = os.path.join(out_dir, f"latent_vs_distance_{task}.json")
+    x = np.asarray(result["object_distance"]) * x_scale
+
+    def norm(v):
+        v = np.asarray(v, np.float64)
+        m = v.max() if v.size else 0.0
+        return v / m if m > 0 else v
+
+    fig, ax = plt.subplots(figsize=(4.5, 3.6))
+    ax.scatter(x, norm(result["scene_latent_distance"]), s=8, alpha=0.6, color="tab:orange",
+               label=f"scene-VAE latent (Spearman {result['spearman_scene']:.2f})")
+    ax.scatter(x, norm(result["object_latent_distance"]), s=8, alpha=0.6, color="tab:blue",
+               label=f"object latent (Spearman {result['spearman_object']:.2f})")
+    ax.set_xlabel(x_label)
+    ax.set_ylabel("latent distance / max")
+    ax.set_title(f"{task}: latent vs object distance (n={result['n']})", fontsize=9)
+    ax.legend(fontsize=7, loc="upper left")
+    fig.tight_layout()
+    fig.savefig(png, dpi=120)
+    plt.close(fig)
+
+    summary = {"task": task, "n": result["n"],
+               "spearman_object": _f(result["spearman_object"]),
+               "spearman_scene": _f(result["spearman_scene"]),
+               "pearson_object": _f(result["pearson_object"]),
+               "pearson_scene": _f(result["pearson_scene"]),
+               **(extra or {}),
+               "object_distance": _list(result["object_distance"]),
+               "object_latent_distance": _list(result["object_latent_distance"]),
+               "scene_latent_distance": _list(result["scene_latent_distance"])}
+    with open(js, "w") as f:
+        json.dump(summary, f, indent=1)
+    return png, js
+
+
+def _f(v) -> float | None:
+    v = float(v)
+    return v if np.isfinite(v) else None
+
+
+def _list(a) -> list:
+    return [round(float(v), 6) for v in np.asarray(a).ravel()]
+
+
+@functools.partial(jax.jit, static_argnames=("cfg",))
+def _scene_encode(params, cfg, rgb):
+    return encoders.encode_mean(params, cfg, rgb)
+
+
+@functools.partial(jax.jit, static_argnames=("enc",))
+def _object_encode(enc: GoalEncoder, frozen, scene_params, lstm_params, rgb):
+    frames = enc.frame_latents(frozen, scene_params, enc.goal_images(frozen, rgb))
+    return enc.single(lstm_params, frames)
+
+
+def model_encoders(cfg, pre, seg, chunk: int = 512) -> tuple[Callable, Callable]:
+    """(encode_scene, encode_object) of a pretrained checkpoint: the scene-VAE mean of the
+    image, and the goal encoding of the config's GoalEncoder (segment -> object-VAE -> one
+    LSTM step for ROLL)."""
+    enc = goal_encoder(cfg)
+    frozen = Frozen(seg=seg, object_vae=None if pre.object_vae is None else pre.object_vae.params)
+    scene_params = pre.scene_vae.params
+    lstm_params = None if pre.lstm is None else pre.lstm.params
+
+    def encode_scene(rgb):
+        return _batched(lambda x: _scene_encode(scene_params, cfg.scene, x), rgb, chunk)
+
+    def encode_object(rgb):
+        return _batched(lambda x: _object_encode(enc, frozen, scene_params, lstm_params, x),
+                        rgb, chunk)
+
+    return encode_scene, encode_object
+
+
+# ============================================================================ 2. occlusion
+
+# Puck-centre waypoints of the path around each hurdle (metres, world xy), from the walls in
+# envs_mjx/scenes.py and the puck radius 0.04: hurdle_top's middle wall spans x in
+# [0.04, 0.06], y in [0.48, 0.62]; the free region is x in [-0.07, 0.15], y in [0.49, 0.71].
+# The puck goes up the left corridor (x ~ -0.015), over the wall (y ~ 0.665) and down the
+# right corridor (x ~ 0.105) to the goal box: the path of the task, on which the arm pushes
+# from bottom to top and occludes the puck.
+HURDLE_PATHS = {
+    "hurdle_top": ((-0.015, 0.55), (-0.015, 0.665), (0.105, 0.665), (0.105, 0.56)),
+    "hurdle_bottom": ((-0.02, 0.66), (-0.02, 0.545), (0.10, 0.545), (0.10, 0.65)),
+}
+HAND_BEHIND = 0.057  # puck radius 0.04 + claw radius 0.015 + 2 mm: the hand touching the puck
+
+
+def puck_paths(key, task: str, n: int, horizon: int, speed=(0.003, 0.008), jitter: float = 0.005):
+    """Kinematic pushes along the task's hurdle path: per trajectory a random start on the
+    path, a random speed (m/step, +-30% per-step noise) and a constant random offset of up to
+    `jitter` per axis; the puck stops at the end of the path. The hand stays just behind the
+    puck (against the direction of motion), as when pushing it.
+
+    Returns numpy (puck xy [n, T, 2], hand xy [n, T, 2])."""
+    if task not in HURDLE_PATHS:
+        raise ValueError(f"occlusion trajectories are defined for {sorted(HURDLE_PATHS)}, "
+                         f"not {task!r}")
+    rng = np.random.default_rng(int(jax.random.randint(key, (), 0, 2**31 - 1)))
+    way = np.asarray(HURDLE_PATHS[task], np.float64)
+    seg = np.diff(way, axis=0)
+    seg_len = np.linalg.norm(seg, axis=1)
+    cum = np.r_[0.0, np.cumsum(seg_len)]
+    total = cum[-1]
+    v = rng.uniform(*speed, size=(n, 1))
+    steps = v * rng.uniform(0.7, 1.3, size=(n, horizon))
+    s0 = rng.uniform(0.0, total - 0.05, size=(n, 1))
+    s = np.clip(s0 + np.cumsum(steps, axis=1) - steps[:, :1], 0.0, total)
+    i = np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(seg) - 1)
+    frac = (s - cum[i]) / seg_len[i]
+    offset = rng.uniform(-jitter, jitter, size=(n, 1, 2))
+    puck = way[i] + frac[..., None] * seg[i] + offset
+    tangent = seg[i] / seg_len[i][..., None]
+    hand = puck - HAND_BEHIND * tangent
+    return puck.astype(np.float32), hand.astype(np.float32)
+
+
+def render_pushes(env, puck, hand, chunk: int = 256) -> np.ndarray:
+    """uint8 [n, T, 48, 48, 3]: each (puck xy, hand xy) placed with `env.place` and rendered."""
+    lo, hi = np.asarray(env.spec.hand_low), np.asarray(env.spec.hand_high)
+    shape = puck.shape[:-1]
+    hand3 = np.concatenate([hand.reshape(-1, 2), np.full((hand[..., 0].size, 1), lo[2])], -1)
+    hand3 = np.clip(hand3, lo, hi).astype(np.float32)
+    both = np.concatenate([hand3, puck.reshape(-1, 2)], -1)
+
+    @jax.jit
+    def run(x):
+        return jax.vmap(lambda r: env.render(env.place(r[:3], r[3:])))(x)
+
+    return _batched(run, both, chunk).reshape(shape + (48, 48, 3))
+
+
+def occlude_frames(key, images, masks, drop: float = OCCLUSION_DROP, min_t: int = 1):
+    """Pick t in [min_t, T) per trajectory and drop `drop` of frame t's object pixels.
+
+    images: segmented uint8 [B, T, 48, 48, 3]; masks: bool [B, T, 48, 48] or None (then the
+    non-zero pixels). Returns (t [B], occluded frames [B, 48, 48, 3])."""
+    images = jnp.asarray(images)
+    b, t_len = images.shape[:2]
+    if t_len <= min_t:
+        raise ValueError(f"trajectories of length {t_len} leave no frame t >= {min_t}")
+    k_t, k_occ = jax.random.split(key)
+    t = jax.random.randint(k_t, (b,), min_t, t_len)
+    frames = images[jnp.arange(b), t]
+    m = None if masks is None else jnp.asarray(masks)[jnp.arange(b), t]
+    return np.asarray(t), np.asarray(losses.occlude(k_occ, frames, m, drop))
+
+
+def retrieval_errors(clean_codes, query_codes, positions, occ_t) -> tuple[np.ndarray, np.ndarray]:
+    """Nearest clean frame (L2 in code space, over all B*T frames) of each query; returns
+    (position error per query [B] in the units of `positions`, retrieved flat index [B]).
+
+    clean_codes [B, T, d]; query_codes [B, d]; positions [B, T, k]; occ_t [B]."""
+    clean = np.asarray(clean_codes, np.float64)
+    b, t_len, d = clean.shape
+    pool = clean.reshape(b * t_len, d)
+    q = np.asarray(query_codes, np.float64)
+    d2 = (np.sum(q * q, 1)[:, None] - 2.0 * q @ pool.T + np.sum(pool * pool, 1)[None, :])
+    nn = np.argmin(d2, axis=1)
+    pos = np.asarray(positions, np.float64)
+    truth = pos[np.arange(b), np.asarray(occ_t)]
+    err = np.linalg.norm(pos.reshape(b * t_len, -1)[nn] - truth, axis=-1)
+    return err, nn
+
+
+def occlusion_retrieval(key, images, masks, positions, frame_encoder: Callable,
+                        heads: dict[str, Callable], drop: float = OCCLUSION_DROP,
+                        min_t: int = 1, scale: float = 100.0) -> dict:
+    """Appendix A. images: segmented uint8 [B, T, 48, 48, 3] (clean trajectories); masks
+    their object masks [B, T, 48, 48] (or None); positions the true puck xy [B, T, 2] (m).
+
+    frame_encoder: images [N, 48, 48, 3] -> per-frame latents [N, d] (the object-VAE mean);
+    heads: name -> f(latents [B, T, d]) -> codes [B, T, d'] (an LSTM over each trajectory, or
+    the identity for the VAE alone). For each trajectory one frame t >= min_t is occluded
+    (`drop` of its object pixels removed); its code is the head's output at t on the
+    trajectory with frame t replaced; the nearest clean code among all B*T frames is
+    retrieved. Returns {"error_cm": {name: [mean, std]}, "errors_cm": {name: [B]}, "occ_t",
+    "retrieved", "n_queries", "pool_size", "chance_cm"} (errors in positions' units times
+    `scale`; chance_cm: the mean error of a uniformly random pick from the pool)."""
+    images = np.asarray(images)
+    b, t_len = images.shape[:2]
+    occ_t, occluded = occlude_frames(key, images, masks, drop, min_t)
+    lat = np.asarray(frame_encoder(images.reshape((-1,) + images.shape[2:])))
+    lat = lat.reshape(b, t_len, -1)
+    occ_lat = np.asarray(frame_encoder(occluded))
+    occ_seq = lat.copy()
+    occ_seq[np.arange(b), occ_t] = occ_lat
+    pos = np.asarray(positions, np.float64)
+    truth = pos[np.arange(b), occ_t]
+    chance = np.linalg.norm(pos.reshape(1, b * t_len, -1) - truth[:, None], axis=-1).mean()
+    out = {"error_cm": {}, "errors_cm": {}, "retrieved": {}, "occ_t": occ_t,
+           "n_queries": int(b), "pool_size": int(b * t_len), "chance_cm": float(chance * scale)}
+    for name, head in heads.items():
+        clean = np.asarray(head(lat))
+        query = np.asarray(head(occ_seq))[np.arange(b), occ_t]
+        err, nn = retrieval_errors(clean, query, positions, occ_t)
+        err = err * scale
+        out["errors_cm"][name] = err
+        out["retrieved"][name] = nn
+        out["error_cm"][name] = [float(err.mean()), float(err.std())]
+    return out
+
+
+# --- the three models --------------------------------------------------------------------
+
+@functools.partial(jax.jit, static_argnames=("cfg", "n_steps", "batch"))
+def _finetune_vae(state, key, images, masks, cfg, n_steps: int, batch: int):
+    n = images.shape[0]
+
+    def body(st, k):
+        k_idx, k_step = jax.random.split(k)
+        idx = jax.random.randint(k_idx, (batch,), 0, n)
+        st, m = encoders.vae_train_step(st, k_step, images[idx], cfg, masks[idx])
+        return st, m["loss"]
+
+    return jax.lax.scan(body, state, jax.random.split(key, n_steps))
+
+
+def finetune_vae(key, state: encoders.VAEState, cfg, images, masks, n_steps: int,
+                 batch: int | None = None, chunk: int = 100):
+    """`n_steps` object-VAE steps (its config's loss: beta-VAE + VAE matching) on frames
+    [N, 48, 48, 3] with object masks [N, 48, 48]. Returns (state, losses [n_steps])."""
+    images, masks = jnp.asarray(images), jnp.asarray(masks)
+    batch = batch or cfg.batch_size
+    hist = []
+    for i in range(0, n_steps, chunk):
+        k = min(chunk, n_steps - i)
+        state, l = _finetune_vae(state, jax.random.fold_in(key, i), images, masks, cfg, k, batch)
+        hist.append(np.asarray(l))
+    return state, (np.concatenate(hist) if hist else np.zeros((0,)))
+
+
+@functools.partial(jax.jit, static_argnames=("vae_cfg", "lstm_cfg", "matching", "n_steps", "batch"))
+def _train_lstm(state, key, vae_params, latents, images, masks, vae_cfg, lstm_cfg,
+                matching: bool, n_steps: int, batch: int):
+    n = latents.shape[0]
+
+    def body(st, k):
+        k_idx, k_occ, k_step = jax.random.split(k, 3)
+        idx = jax.random.randint(k_idx, (batch,), 0, n)
+        occ = None
+        if matching:
+            occ = encoders.make_occlusion(k_occ, vae_params, vae_cfg, images[idx], lstm_cfg,
+                                          masks[idx])
+        st, m = encoders.lstm_train_step(st, k_step, latents[idx], lstm_cfg, occ)
+        return st, m["loss"]
+
+    return jax.lax.scan(body, state, jax.random.split(key, n_steps))
+
+
+def train_occlusion_lstms(key, vae_params, vae_cfg, lstm_cfg, images, masks, n_steps: int,
+                          batch: int = 25, chunk: int = 100):
+    """Two LSTMs from the same initialisation on the same batches of the same trajectories
+    (segmented uint8 [B, T, 48, 48, 3], masks [B, T, 48, 48]) over the same object-VAE: one
+    with auto-encoder + matching loss (synthetic occlusion from `make_occlusion`, drop
+    lstm_cfg.occlusion_drop), one with the auto-encoder loss only.
+
+    Returns ({"lstm_matching": params, "lstm": params}, {name: losses [n_steps]})."""
+    images, masks = jnp.asarray(images), jnp.asarray(masks)
+    latents = encode_frames(vae_params, vae_cfg, images)
+    k_init, k_train = jax.random.split(key)
+    init = encoders.init_lstm(k_init, lstm_cfg, latents.shape[-1])
+    params, hist = {}, {}
+    for name, matching in (("lstm_matching", True), ("lstm", False)):
+        st, h = init, []
+        for i in range(0, n_steps, chunk):
+            k = min(chunk, n_steps - i)
+            st, l = _train_lstm(st, jax.random.fold_in(k_train, i), vae_params, latents, images,
+                                masks, vae_cfg, lstm_cfg, matching, k, batch)
+            h.append(np.asarray(l))
+        params[name] = st.params
+        hist[name] = np.concatenate(h) if h else np.zeros((0,))
+    return params, hist
+
+
+def encode_frames(vae_params, vae_cfg, images, chunk: int = 1024) -> jnp.ndarray:
+    """Object-VAE means of images [..., 48, 48, 3] -> [..., d] (chunked)."""
+    images = np.asarray(images)
+    lead = images.shape[:-3]
+    flat = images.reshape((-1,) + images.shape[-3:])
+    z = _batched(lambda x: _scene_encode(vae_params, vae_cfg, x), flat, chunk)
+    return jnp.asarray(z.reshape(lead + (-1,)))
+
+
+def occlusion_models(vae_params, vae_cfg, lstm_params: dict) -> tuple[Callable, dict]:
+    """(frame_encoder, heads) for `occlusion_retrieval`: the object-VAE mean per frame; the
+    two LSTMs over each trajectory (from the zero state) and the identity for the VAE alone."""
+    enc_lstm = jax.jit(lambda p, z: lstm_encode(p, z))
+
+    def frame_encoder(x):
+        return np.asarray(encode_frames(vae_params, vae_cfg, x))
+
+    heads = {name: functools.partial(lambda p, z: np.asarray(enc_lstm(p, jnp.asarray(z))), p)
+             for name, p in lstm_params.items()}
+    heads["vae"] = lambda z: np.asarray(z)
+    return frame_encoder, heads
+
+
+def write_occlusion(result: dict, out_dir: str, task: str, extra: dict | None = None
+                    ) -> tuple[str, str]:
+    """Bar plot (mean +- std per model, paper values as markers) and JSON."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    os.makedirs(out_dir, exist_ok=True)
+    png = os.path.join(out_dir, f"occlusion_{task}.png")
+    js = os.path.join(out_dir, f"occlusion_{task}.json")
+    names = list(result["error_cm"])
+    labels = {"lstm_matching": "LSTM +\nmatching loss", "lstm": "LSTM", "vae": "object-VAE"}
+    mean = [result["error_cm"][k][0] for k in names]
+    std = [result["error_cm"][k][1] for k in names]
+    fig, ax = plt.subplots(figsize=(4.2, 3.4))
+    xs = np.arange(len(names))
+    ax.bar(xs, mean, yerr=std, capsize=4, color=["tab:blue", "tab:orange", "tab:green"][:len(names)],
+           alpha=0.8, label="this run")
+    paper = [PAPER_ERROR_CM.get(k, np.nan) for k in names]
+    ax.scatter(xs, paper, marker="D", s=30, color="crimson", zorder=3, label="paper (App. A)")
+    if result.get("chance_cm") is not None:
+        ax.axhline(result["chance_cm"], color="grey", ls="--", lw=1, label="random frame")
+    ax.set_xticks(xs)
+    ax.set_xticklabels([labels.get(k, k) for k in names], fontsize=8)
+    ax.set_ylabel("puck position error (cm)")
+    ax.set_title(f"{task}: occluded-frame retrieval (n={result['n_queries']})", fontsize=9)
+    ax.set_ylim(bottom=0)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(png, dpi=120)
+    plt.close(fig)
+    summary = {"task": task, "error_cm": result["error_cm"],
+               "n_queries": result["n_queries"], "pool_size": result["pool_size"],
+               "chance_cm": result.get("chance_cm"),
+               "paper_error_cm": PAPER_ERROR_CM, **(extra or {}),
+               "errors_cm": {k: _list(v) for k, v in result["errors_cm"].items()},
+               "occ_t": [int(t) for t in result["occ_t"]]}
+    with open(js, "w") as f:
+        json.dump(summary, f, indent=1)
+    return png, js
+
+
+# ============================================================================ checkpoints / CLI
+
+def load_checkpoint(ckpt: str, task: str, preset: str | None = None):
+    """(cfg, Pretrained, seg params) from a `roll_jax.pretrain --out` directory. The preset is
+    read from DIR/pretrain.json when not given (it sets the LSTM training config)."""
+    from configs.train import make_config
+    from roll_jax import pretrain
+    from roll_jax.segmentation import pipeline
+
+    if preset is None:
+        meta = os.path.join(ckpt, "pretrain.json")
+        preset = "paper"
+        if os.path.exists(meta):
+            with open(meta) as f:
+                info = json.load(f)
+            if info.get("task") not in (None, task):
+                raise ValueError(f"checkpoint {ckpt} was pretrained for task {info['task']!r}, "
+                                 f"not {task!r}")
+            preset = info.get("preset", preset)
+    cfg = make_config(task, "roll", preset)
+    pre = pretrain.load(os.path.join(ckpt, "encoders"), cfg)
+    seg, _ = pipeline.load(os.path.join(ckpt, "segmentation"), task)
+    return cfg, pre, seg
+
+
+def run_latent_vs_distance(task: str, ckpt: str, out: str, n: int = 500, seed: int = 0,
+                           preset: str | None = None) -> dict:
+    import envs_mjx
+
+    cfg, pre, seg = load_checkpoint(ckpt, task, preset)
+    env = envs_mjx.make(task)
+    obs, goal, dist = observation_set(env, jax.random.PRNGKey(seed), n)
+    encode_scene, encode_object = model_encoders(cfg, pre, seg)
+    res = latent_vs_distance(obs, goal, dist, encode_scene, encode_object)
+    x_label, x_scale = _units(env)
+    png, js = write_latent_vs_distance(res, out, task, x_label, x_scale,
+                                       extra={"preset": cfg.preset, "ckpt": os.path.abspath(ckpt),
+                                              "seed": seed})
+    summary = {k: res[k] for k in ("n", "spearman_object", "spearman_scene")}
+    return {**summary, "task": task, "png": png, "json": js}
+
+
+def run_occlusion(ckpt: str, out: str, task: str = "hurdle_top", n_train: int = 64,
+                  n_eval: int = 64, horizon: int | None = None, lstm_steps: int = 200,
+                  vae_steps: int = 200, batch: int = 25, drop: float = OCCLUSION_DROP,
+                  seed: int = 0, preset: str | None = None) -> dict:
+    """Trajectories -> segment -> (fine-tune the object-VAE) -> two LSTMs -> retrieval."""
+    import time
+
+    import envs_mjx
+    from roll_jax.segmentation import pipeline
+
+    t0 = time.perf_counter()
+    cfg, pre, seg = load_checkpoint(ckpt, task, preset)
+    if pre.object_vae is None:
+        raise ValueError("the occlusion analysis needs a checkpoint with an object-VAE")
+    env = envs_mjx.make(task)
+    horizon = horizon or env.horizon
+    key = jax.random.PRNGKey(seed)
+    k_path, k_vae, k_lstm, k_occ = jax.random.split(key, 4)
+    puck, hand = puck_paths(k_path, task, n_train + n_eval, horizon)
+    rgb = render_pushes(env, puck, hand)
+    seg_fn = jax.jit(lambda x: pipeline.segment(seg, x))
+    masks = _batched(seg_fn, rgb.reshape((-1,) + rgb.shape[2:]), 256).reshape(rgb.shape[:-1])
+    images = np.where(masks[..., None], rgb, 0).astype(np.uint8)
+    t_data = time.perf_counter() - t0
+    tr, ev = slice(0, n_train), slice(n_train, n_train + n_eval)
+    vcfg = cfg.object_vae
+    vae_state, vae_hist = finetune_vae(k_vae, pre.object_vae, vcfg,
+                                       images[tr].reshape((-1, 48, 48, 3)),
+                                       masks[tr].reshape((-1, 48, 48)), vae_steps)
+    lstm_params, lstm_hist = train_occlusion_lstms(k_lstm, vae_state.params, vcfg, cfg.lstm,
+                                                   images[tr], masks[tr], lstm_steps, batch)
+    t_train = time.perf_counter() - t0 - t_data
+    frame_encoder, heads = occlusion_models(vae_state.params, vcfg, lstm_params)
+    res = occlusion_retrieval(k_occ, images[ev], masks[ev], puck[ev], frame_encoder, heads, drop,
+                              min_t=cfg.lstm.min_occlusion_t)
+    seg_px = masks.reshape(masks.shape[0], masks.shape[1], -1).sum(-1)
+    extra = {"preset": cfg.preset, "ckpt": os.path.abspath(ckpt), "seed": seed,
+             "n_train_trajectories": n_train, "n_eval_trajectories": n_eval, "horizon": horizon,
+             "drop": drop, "train_drop": cfg.lstm.occlusion_drop, "lstm_steps": lstm_steps,
+             "lstm_batch": batch, "vae_steps": vae_steps,
+             "segmented_pixels_mean": float(seg_px.mean()),
+             "frames_without_object_pixels": float((seg_px == 0).mean()),
+             "loss_first_last": {"vae": _first_last(vae_hist),
+                                 **{k: _first_last(v) for k, v in lstm_hist.items()}},
+             "seconds": {"data": round(t_data, 1), "train": round(t_train, 1)}}
+    png, js = write_occlusion(res, out, task, extra)
+    return {"task": task, "error_cm": res["error_cm"], "png": png, "json": js, **extra}
+
+
+def _first_last(h) -> list | None:
+    h = np.asarray(h)
+    return [float(h[0]), float(h[-1])] if h.size else None
+
+
+def main(argv=None):
+    from configs.train import PRESETS, TASKS
+
+    p = argparse.ArgumentParser(prog="python -m roll_jax.analysis", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = p.add_subparsers(dest="cmd", required=True)
+    a1 = sub.add_parser("latent-vs-distance", help="paper Figure 5")
+    a1.add_argument("--task", required=True, choices=TASKS)
+    a1.add_argument("--n", type=int, default=500, help="observations (default 500)")
+    a2 = sub.add_parser("occlusion", help="appendix A occlusion retrieval")
+    a2.add_argument("--task", default="hurdle_top", choices=sorted(HURDLE_PATHS))
+    a2.add_argument("--n-train", type=int, default=None,
+                    help="training trajectories (default: smoke 64, paper 500)")
+    a2.add_argument("--n-eval", type=int, default=None,
+                    help="evaluation trajectories = queries (default: smoke 64, paper 200)")
+    a2.add_argument("--horizon", type=int, default=None, help="frames per trajectory (task's)")
+    a2.add_argument("--lstm-steps", type=int, default=None,
+                    help="steps per LSTM (default: smoke 200, paper 10000)")
+    a2.add_argument("--vae-steps", type=int, default=None,
+                    help="object-VAE fine-tuning steps on the trajectories (default: smoke 200, "
+                         "paper 5000)")
+    a2.add_argument("--batch", type=int, default=25, help="LSTM batch (trajectories), default 25")
+    a2.add_argument("--drop", type=float, default=OCCLUSION_DROP)
+    for a in (a1, a2):
+        a.add_argument("--ckpt", required=True, help="python -m roll_jax.pretrain --out DIR")
+        a.add_argument("--out", default=None, help="default: CKPT/analysis")
+        a.add_argument("--preset", default=None, choices=PRESETS,
+                       help="default: the checkpoint's (pretrain.json)")
+        a.add_argument("--seed", type=int, default=0)
+    a = p.parse_args(argv)
+    out = a.out or os.path.join(a.ckpt, "analysis")
+    try:
+        if a.cmd == "latent-vs-distance":
+            res = run_latent_vs_distance(a.task, a.ckpt, out, a.n, a.seed, a.preset)
+        else:
+            smoke = _ckpt_preset(a.ckpt, a.preset) == "smoke"
+            d = ({"n_train": 64, "n_eval": 64, "lstm_steps": 200, "vae_steps": 200} if smoke
+                 else {"n_train": 500, "n_eval": 200, "lstm_steps": 10000, "vae_steps": 5000})
+            res = run_occlusion(a.ckpt, out, a.task,
+                                n_train=a.n_train or d["n_train"], n_eval=a.n_eval or d["n_eval"],
+                                horizon=a.horizon,
+                                lstm_steps=d["lstm_steps"] if a.lstm_steps is None else a.lstm_steps,
+                                vae_steps=d["vae_steps"] if a.vae_steps is None else a.vae_steps,
+                                batch=a.batch, drop=a.drop, seed=a.seed, preset=a.preset)
+    except (FileNotFoundError, ValueError) as e:
+        sys.exit(f"error: {e}")
+    print(json.dumps(res, indent=2))
+
+
+def _ckpt_preset(ckpt: str, preset: str | None) -> str:
+    if preset:
+        return preset
+    meta = os.path.join(ckpt, "pretrain.json")
+    if os.path.exists(meta):
+        with open(meta) as f:
+            return json.load(f).get("preset", "paper")
+    return "paper"
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,199 @@
+"""roll_jax.analysis: Spearman, latent-vs-distance (Figure 5), occlusion retrieval (App. A).
+
+Synthetic images and ideal encoders; no environment, no pretrained checkpoint."""
+import json
+import os
+
+import jax
+import numpy as np
+import pytest
+
+from roll_jax import analysis
+
+# ----------------------------------------------------------------------------- statistics
+
+def test_rankdata_average_ties():
+    np.testing.assert_array_equal(analysis.rankdata([3.0, 1.0, 2.0, 2.0]), [4.0, 1.0, 2.5, 2.5])
+    np.testing.assert_array_equal(analysis.rankdata([5, 5, 5]), [2.0, 2.0, 2.0])
+    np.testing.assert_array_equal(analysis.rankdata([0.1, 0.3, 0.3, 0.3, -1.0]),
+                                  [2.0, 4.0, 4.0, 4.0, 1.0])
+
+
+def test_spearman_hand_computed_with_ties():
+    # x ranks [1, 2.5, 2.5, 4], y ranks [1, 3, 2, 4]; centred: [-1.5, 0, 0, 1.5] and
+    # [-1.5, .5, -.5, 1.5]; cov 4.5, var 4.5 and 5 -> rho = 4.5 / sqrt(22.5) = sqrt(0.9).
+    rho = analysis.spearman([1.0, 2.0, 2.0, 3.0], [10.0, 30.0, 20.0, 40.0])
+    assert rho == pytest.approx(np.sqrt(0.9), abs=1e-12)
+    assert analysis.spearman([1, 2, 3, 4], [8, 4, 2, 1]) == pytest.approx(-1.0)
+    assert analysis.spearman([1, 2, 3], [1, 10, 1000]) == pytest.approx(1.0)  # monotone only
+    assert np.isnan(analysis.spearman([1, 2, 3], [7, 7, 7]))  # constant: undefined
+    with pytest.raises(ValueError, match="same length"):
+        analysis.spearman([1, 2, 3], [1, 2])
+
+
+def test_spearman_matches_scipy_when_available():
+    stats = pytest.importorskip("scipy.stats")
+    rng = np.random.default_rng(0)
+    x = rng.integers(0, 6, 40).astype(float)  # many ties
+    y = x + rng.integers(0, 4, 40)
+    assert analysis.spearman(x, y) == pytest.approx(stats.spearmanr(x, y).statistic, abs=1e-12)
+
+
+# ----------------------------------------------------------------------------- Figure 5
+
+def _index_images(n):
+    """uint8 [n, 48, 48, 3] whose pixel (0, 0, 0..1) holds the image's index (16 bit)."""
+    img = np.zeros((n, 48, 48, 3), np.uint8)
+    idx = np.arange(n)
+    img[:, 0, 0, 0], img[:, 0, 0, 1] = idx % 256, idx // 256
+    return img
+
+
+def _read_index(images):
+    images = np.asarray(images)
+    return images[:, 0, 0, 0].astype(int) + 256 * images[:, 0, 0, 1].astype(int)
+
+
+def test_latent_vs_distance_monotone_object_latent(tmp_path):
+    rng = np.random.default_rng(1)
+    n = 60
+    dist = rng.uniform(0.0, 0.25, n)  # metres
+    images = _index_images(n + 1)
+    obs, goal = images[:n], images[n]  # index n is the goal
+    # Object latent: the goal at the origin, observation i at g(d_i) along a random direction
+    # with g monotone, so ||z_i - z_g|| = g(d_i). Scene latent: unrelated random vectors.
+    dirs = rng.normal(size=(n + 1, 6))
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    radius = np.r_[np.exp(3.0 * dist) - 0.5, 0.0]
+    obj_table = dirs * radius[:, None]
+    scene_table = rng.normal(size=(n + 1, 4))
+
+    res = analysis.latent_vs_distance(obs, goal, dist,
+                                      encode_scene=lambda x: scene_table[_read_index(x)],
+                                      encode_object=lambda x: obj_table[_read_index(x)])
+    assert res["n"] == n
+    assert res["spearman_object"] == pytest.approx(1.0, abs=1e-12)
+    assert abs(res["spearman_scene"]) < 0.5
+    np.testing.assert_allclose(res["object_latent_distance"], radius[:n], rtol=1e-9, atol=1e-12)
+
+    png, js = analysis.write_latent_vs_distance(res, str(tmp_path), "puck_push")
+    assert os.path.getsize(png) > 1000
+    with open(png, "rb") as f:
+        assert f.read(8) == b"\x89PNG\r\n\x1a\n"
+    with open(js) as f:
+        out = json.load(f)
+    assert {"spearman_object", "spearman_scene", "n", "task"} <= set(out)
+    assert out["task"] == "puck_push" and out["n"] == n
+    assert out["spearman_object"] == pytest.approx(1.0)
+    assert len(out["object_distance"]) == n
+
+
+# ----------------------------------------------------------------------------- occlusion
+
+def _disc_trajectories(b, t_len, rng):
+    """Segmented images with a disc (the object, mask = disc) and the position in cm written
+    into row 0 (outside the mask, so occlusion never touches it); positions in metres."""
+    pos_cm = rng.integers(0, 40, size=(b, t_len, 2))
+    images = np.zeros((b, t_len, 48, 48, 3), np.uint8)
+    yy, xx = np.mgrid[0:48, 0:48]
+    masks = np.zeros((b, t_len, 48, 48), bool)
+    for i in range(b):
+        for t in range(t_len):
+            cy, cx = 8 + pos_cm[i, t]
+            masks[i, t] = (yy - cy) ** 2 + (xx - cx) ** 2 <= 16
+    images[masks] = (200, 120, 40)
+    images[:, :, 0, 0, 0] = pos_cm[..., 0]
+    images[:, :, 0, 1, 0] = pos_cm[..., 1]
+    return images, masks, pos_cm / 100.0
+
+
+def test_occlude_frames_drops_85_percent_of_object_pixels():
+    rng = np.random.default_rng(2)
+    images, masks, _ = _disc_trajectories(16, 5, rng)
+    t, occ = analysis.occlude_frames(jax.random.PRNGKey(0), images, masks, drop=0.85)
+    assert t.shape == (16,) and t.min() >= 1 and t.max() <= 4
+    before = masks[np.arange(16), t].sum()
+    after = (occ.any(-1) & masks[np.arange(16), t]).sum()
+    assert after / before == pytest.approx(0.15, abs=0.04)
+    # pixels outside the mask are untouched
+    outside = ~masks[np.arange(16), t]
+    np.testing.assert_array_equal(occ[outside], images[np.arange(16), t][outside])
+
+
+def test_occlusion_retrieval_perfect_encoder_has_zero_error(tmp_path):
+    rng = np.random.default_rng(3)
+    images, masks, pos = _disc_trajectories(8, 6, rng)
+
+    def read_position(x):  # the "perfect" frame encoder: the true position
+        return np.asarray(x)[:, 0, :2, 0].astype(np.float64)
+
+    heads = {name: (lambda z: z) for name in analysis.OCCLUSION_MODELS}
+    res = analysis.occlusion_retrieval(jax.random.PRNGKey(1), images, masks, pos,
+                                       read_position, heads)
+    assert set(res["error_cm"]) == {"lstm_matching", "lstm", "vae"}
+    for name in analysis.OCCLUSION_MODELS:
+        assert res["error_cm"][name] == [0.0, 0.0]
+    assert res["n_queries"] == 8 and res["pool_size"] == 48 and res["chance_cm"] > 0
+
+    png, js = analysis.write_occlusion(res, str(tmp_path), "hurdle_top")
+    assert os.path.getsize(png) > 1000
+    with open(js) as f:
+        out = json.load(f)
+    assert out["error_cm"] == {"lstm_matching": [0.0, 0.0], "lstm": [0.0, 0.0],
+                               "vae": [0.0, 0.0]}
+
+    # A blind encoder (a constant) retrieves an arbitrary frame: positive error.
+    res = analysis.occlusion_retrieval(jax.random.PRNGKey(1), images, masks, pos,
+                                       lambda x: np.zeros((len(x), 2)), {"vae": lambda z: z})
+    assert res["error_cm"]["vae"][0] > 0
+
+
+def test_retrieval_errors_uses_history_head():
+    """A head that reads the previous frame's code (an ideal 'LSTM' that remembers) still
+    finds the occluded frame when the frame itself is unreadable."""
+    b, t_len = 5, 4
+    pos = np.arange(b * t_len * 2, dtype=float).reshape(b, t_len, 2)
+    # code_t = position at t-1 (code_0: a distinct marker): frame t itself is never read
+    clean = np.concatenate([-1000.0 - pos[:, :1], pos[:, :-1]], 1)
+    occ_t = np.array([1, 2, 3, 1, 2])
+    err, nn = analysis.retrieval_errors(clean, clean[np.arange(b), occ_t], pos, occ_t)
+    np.testing.assert_array_equal(err, 0.0)
+    np.testing.assert_array_equal(nn, np.arange(b) * t_len + occ_t)
+
+
+def test_puck_paths_stay_clear_of_the_hurdle():
+    puck, hand = analysis.puck_paths(jax.random.PRNGKey(0), "hurdle_top", 32, 50)
+    assert puck.shape == hand.shape == (32, 50, 2)
+    x, y = puck[..., 0], puck[..., 1]
+    # free region for the puck centre (radius 4 cm) and the middle wall x in [.04, .06], y < .62
+    assert x.min() >= -0.0351 and x.max() <= 0.1101 and y.min() >= 0.5349 and y.max() <= 0.6701
+    in_wall_band = (x > 0.0 + 0.0051) & (x < 0.10 - 0.0051)
+    assert np.all(y[in_wall_band] >= 0.66 - 0.0051)
+    # the puck moves and the hand touches it from behind
+    assert np.all(np.linalg.norm(puck[:, -1] - puck[:, 0], axis=-1) > 0.03)
+    np.testing.assert_allclose(np.linalg.norm(puck - hand, axis=-1), analysis.HAND_BEHIND,
+                               rtol=1e-4)
+    with pytest.raises(ValueError, match="hurdle"):
+        analysis.puck_paths(jax.random.PRNGKey(0), "door_open", 2, 5)
+
+
+def test_occlusion_models_train_and_retrieve_tiny():
+    """End to end on tiny shapes: untrained object-VAE, two 8-unit LSTMs trained 2 steps each
+    (with / without matching loss); three finite errors."""
+    from configs.encoders import LSTMConfig, object_vae_config
+    from roll_jax import encoders
+
+    rng = np.random.default_rng(4)
+    images, masks, pos = _disc_trajectories(4, 4, rng)
+    vcfg = object_vae_config("hurdle_top")
+    lcfg = LSTMConfig(hidden=8, out_dim=vcfg.latent_dim)
+    vae = encoders.init_vae(jax.random.PRNGKey(0), vcfg)
+    params, hist = analysis.train_occlusion_lstms(jax.random.PRNGKey(1), vae.params, vcfg, lcfg,
+                                                  images, masks, n_steps=2, batch=3)
+    assert set(hist) == {"lstm_matching", "lstm"}
+    assert all(h.shape == (2,) and np.all(np.isfinite(h)) for h in hist.values())
+    frame_encoder, heads = analysis.occlusion_models(vae.params, vcfg, params)
+    res = analysis.occlusion_retrieval(jax.random.PRNGKey(2), images, masks, pos,
+                                       frame_encoder, heads)
+    assert set(res["error_cm"]) == {"lstm_matching", "lstm", "vae"}
+    assert all(np.isfinite(v).all() and v[0] >= 0 for v in res["error_cm"].values())
