@@ -42,7 +42,7 @@ SMOKE = {"n_frames": 300, "n_envs": 30, "unet_features": 8, "unet_epochs": 3, "e
 _N_FRAMES = {"puck_push": 2000, "hurdle_bottom": 2000, "hurdle_top": 2000, "door_open": 4000,
              "pickup": 4000}
 # Per-task U-Net probability threshold (our calibration, see docs/segmentation.md).
-_ROBOT_THRESHOLD: dict[str, float] = {"puck_push": 0.3}
+_ROBOT_THRESHOLD: dict[str, float] = {"puck_push": 0.3, "hurdle_bottom": 0.1, "hurdle_top": 0.1}
 PRESETS = ("smoke", "paper")
 
 

@@ -28,6 +28,7 @@ from flax import struct
 from configs.train import TrainConfig
 from roll_jax import encoders
 from roll_jax.agent import goal_encoder
+from roll_jax.checkpoint import read_meta, write_meta
 from roll_jax.segmentation import pipeline
 
 CHECKPOINT_VERSION = 1
@@ -150,12 +151,9 @@ def _meta(cfg: TrainConfig) -> dict:
 def save(path: str, cfg: TrainConfig, pre: Pretrained) -> None:
     import orbax.checkpoint as ocp
 
-    path = os.path.abspath(path)
-    os.makedirs(path, exist_ok=True)
+    path = write_meta(path, _meta(cfg))
     with ocp.StandardCheckpointer() as ck:
         ck.save(os.path.join(path, "encoders"), pre, force=True)
-    with open(os.path.join(path, "meta.json"), "w") as f:
-        json.dump(_meta(cfg), f, indent=2)
 
 
 def _abstract(cfg: TrainConfig) -> Pretrained:
@@ -171,12 +169,7 @@ def load(path: str, cfg: TrainConfig) -> Pretrained:
     """Restore; refuses a checkpoint for another task, image size or latent size."""
     import orbax.checkpoint as ocp
 
-    path = os.path.abspath(path)
-    meta_path = os.path.join(path, "meta.json")
-    if not os.path.exists(meta_path):
-        raise FileNotFoundError(f"no encoder checkpoint at {path} (missing meta.json)")
-    with open(meta_path) as f:
-        meta = json.load(f)
+    path, meta = read_meta(path, "encoder")
     want = _meta(cfg)
     for k in ("task", "image_shape", "scene_latent", "object_latent", "lstm"):
         if meta.get(k) != want[k]:

@@ -16,7 +16,6 @@ The algorithm never reads ground-truth labels; `evaluate` uses them to score the
 from __future__ import annotations
 
 import dataclasses
-import json
 import os
 
 import jax
@@ -25,6 +24,7 @@ import numpy as np
 from flax import struct
 
 from configs.segmentation import SegmentationConfig
+from roll_jax.checkpoint import read_meta, write_meta
 from roll_jax.segmentation import mog2, unet
 
 CHECKPOINT_VERSION = 1
@@ -272,24 +272,16 @@ def save(path: str, task: str, params: SegParams, cfg: SegmentationConfig) -> No
     """Orbax checkpoint of the params plus a meta.json naming task and image size."""
     import orbax.checkpoint as ocp
 
-    path = os.path.abspath(path)
-    os.makedirs(path, exist_ok=True)
+    path = write_meta(path, _meta(task, params, cfg))
     with ocp.StandardCheckpointer() as ckptr:
         ckptr.save(os.path.join(path, "params"), params, force=True)
-    with open(os.path.join(path, "meta.json"), "w") as f:
-        json.dump(_meta(task, params, cfg), f, indent=2)
 
 
 def load(path: str, task: str, image_shape=(48, 48, 3)) -> tuple[SegParams, SegmentationConfig]:
     """Restore a checkpoint; refuses one fitted for another task or image size."""
     import orbax.checkpoint as ocp
 
-    path = os.path.abspath(path)
-    meta_path = os.path.join(path, "meta.json")
-    if not os.path.exists(meta_path):
-        raise FileNotFoundError(f"no segmentation checkpoint at {path} (missing meta.json)")
-    with open(meta_path) as f:
-        meta = json.load(f)
+    path, meta = read_meta(path, "segmentation")
     if meta["task"] != task:
         raise ValueError(f"segmentation checkpoint {path} was fitted for task "
                          f"{meta['task']!r}, not {task!r}")
