@@ -150,7 +150,7 @@ def sac_updates(cfg: TrainConfig, enc: GoalEncoder, state: TrainState, key, n_up
 def log_likelihood(cfg: TrainConfig, params, images, key):
     """Skew-Fit's importance-sampled log p(x) under the VAE (Gaussian identity-variance
     decoder), with cfg.skew_num_latents samples of q(z|x)."""
-    model = ConvVAE(cfg.scene.latent_dim, cfg.scene.feature_dim, cfg.scene.min_variance)
+    model = encoders.vae_model(cfg.scene)
     mean, logvar = model.apply(params, images, method=ConvVAE.encode)
     k = cfg.skew_num_latents
     eps = jax.random.normal(key, (k,) + mean.shape)

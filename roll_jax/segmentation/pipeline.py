@@ -148,8 +148,7 @@ def masks(params: SegParams, rgb):
 
 def segment(params: SegParams, rgb):
     """Object mask bool[..., H, W] of uint8 rgb [..., H, W, 3]; pure and jittable."""
-    if not isinstance(rgb, jax.core.Tracer):
-        _check_rgb(params, rgb)
+    _check_rgb(params, rgb)  # static shape/dtype: works on tracers too
     return masks(params, rgb)[2]
 
 
