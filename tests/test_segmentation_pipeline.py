@@ -39,6 +39,18 @@ def test_robot_labels_come_from_the_background_model(fitted):
     assert close[:, never_robot].mean() > 0.95
 
 
+def test_lower_label_background_ratio_labels_more_of_the_arm(fitted):
+    _env, params, info = fitted
+    frames = info["frames"]
+    at_09 = np.asarray(pipeline.robot_labels(params.background, frames, 0.9))
+    at_05 = np.asarray(pipeline.robot_labels(params.background, frames, 0.5))
+    np.testing.assert_array_equal(at_09, np.asarray(info["robot_labels"]))  # the config's 0.9
+    assert (at_09 <= at_05).all() and at_05.sum() > at_09.sum()  # a superset, strictly larger
+    assert params.background.background_ratio == np.float32(0.9)  # segment keeps OpenCV's
+    with pytest.raises(ValueError, match="label_background_ratio"):
+        segmentation_config("door_open", label_background_ratio=0.0)
+
+
 def test_unet_loss_falls(fitted):
     _, _, info = fitted
     loss = np.asarray(info["unet_loss"])

@@ -31,6 +31,8 @@ def parse_args(argv=None):
     p.add_argument("--n-frames", type=int, default=None, help="override the preset")
     p.add_argument("--robot-threshold", type=float, default=None, help="override the task's")
     p.add_argument("--unet-features", type=int, default=None, help="override the U-Net width")
+    p.add_argument("--label-background-ratio", type=float, default=None,
+                   help="override the task's MOG2 background ratio for robot labels")
     p.add_argument("--eval-only", action="store_true",
                    help="re-evaluate the checkpoint in DIR/ckpt instead of fitting")
     a = p.parse_args(argv)
@@ -54,7 +56,8 @@ def main(argv=None) -> dict:
     overrides = {k: v for k, v in {"eval_states": a.eval_states, "unet_epochs": a.unet_epochs,
                                         "n_frames": a.n_frames,
                                         "robot_threshold": a.robot_threshold,
-                                        "unet_features": a.unet_features}.items()
+                                        "unet_features": a.unet_features,
+                                        "label_background_ratio": a.label_background_ratio}.items()
                  if v is not None}
     try:
         cfg = segmentation_config(a.task, a.preset, **overrides)

@@ -4,7 +4,9 @@ Paper section "Unknown Object Segmentation" and appendix B.1:
 
 1. random actions in the object-free scene (`env.empty_scene()`) give `n_frames` images;
    MOG2 is fitted on them with history = n_frames and OpenCV's automatic learning rate;
-2. the frozen MOG2's foreground on those same frames labels the robot;
+2. the frozen MOG2's foreground on those same frames labels the robot (with its background
+   ratio set to `cfg.label_background_ratio`: a mask-only setting, the fitted modes are the
+   same);
 3. a U-Net learns robot-vs-rest from those labels, with synthetic object-like distractors
    pasted in and labelled not-robot (otherwise anything that moves would be "robot");
 4. `segment(params, rgb)`: object mask = MOG2 foreground (lr 0, shadows count) AND NOT
@@ -82,6 +84,13 @@ def fit_background(frames, cfg: SegmentationConfig) -> mog2.MOG2Model:
     return model
 
 
+def robot_labels(background: mog2.MOG2Model, frames, background_ratio: float) -> jax.Array:
+    """bool[N, H, W]: the fitted model's foreground on `frames`, classified with
+    `background_ratio` (a mask-only setting: OpenCV uses it for no model update)."""
+    labeller = background.replace(background_ratio=np.float32(background_ratio))
+    return mog2.foreground(labeller, frames, shadows_as_foreground=True)
+
+
 def paste_distractors(key, images, labels, prob: float):
     """Paste one object-like blob (ellipse or box, random size and colour) into each image with
     probability `prob`; its pixels become not-robot. Pure and jittable (per minibatch)."""
@@ -116,7 +125,7 @@ def fit(env, key, cfg: SegmentationConfig, progress=None, frames=None):
     if frames is None:
         frames = record_empty_scene(env, k_rec, cfg.n_frames, cfg.n_envs)
     background = fit_background(frames, cfg)
-    robot = mog2.foreground(background, frames, shadows_as_foreground=True)
+    robot = robot_labels(background, frames, cfg.label_background_ratio)
     augment = lambda k, x, y: paste_distractors(k, x, y, cfg.distractor_prob)
     state, history = unet.fit_unet(k_unet, frames, robot.astype(jnp.float32), cfg,
                                    augment_fn=augment, progress=progress)
@@ -159,9 +168,10 @@ def segmented_image(rgb, mask):
 
 # ----------------------------------------------------------------------------- evaluation
 
-def random_object_states(env, key, n: int, settle_steps: int = 5):
+def random_object_states(env, key, n: int, settle_steps: int = 5, chunk: int = 32):
     """States with the hand and the object uniform in their boxes (object in its goal space),
-    after a few random steps so the scene settles; returns (rgb, labels) [n, H, W, ...]."""
+    after a few random steps so the scene settles; returns numpy (rgb, labels) [n, H, W, ...].
+    State i depends only on `key` and i (not on `chunk`)."""
     from envs_mjx.rollout import random_actions, rollout
 
     s = env.spec
@@ -173,7 +183,15 @@ def random_object_states(env, key, n: int, settle_steps: int = 5):
         state, _ = rollout(env, state, random_actions(k_a, settle_steps, env.action_size))
         return env.render_both(state)
 
-    return jax.jit(jax.vmap(one))(jax.random.split(key, n))
+    # Fixed chunks of `chunk` states, one compile: a single vmap over ~750 pickup states sat
+    # asleep on a futex for hours on CPU (twice), while chunks of 16-32 run in < 1 s each.
+    keys = jax.random.split(key, n)
+    pad = -n % chunk
+    keys = jnp.concatenate([keys, keys[:pad]]) if pad else keys
+    run = jax.jit(jax.vmap(one))
+    outs = [jax.device_get(run(keys[i:i + chunk])) for i in range(0, n + pad, chunk)]
+    rgb, labels = (np.concatenate(parts)[:n] for parts in zip(*outs))
+    return rgb, labels
 
 
 def mask_scores(pred, labels):
