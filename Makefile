@@ -14,8 +14,11 @@ $(STAMP): pyproject.toml
 train: $(STAMP)
 	$(VENV)/bin/python train.py --task puck_push --algo roll --preset smoke --seeds 2 --out runs/puck_push_roll_smoke
 
+# Two workers, whole files per worker (module fixtures are built once): XLA compiles on one
+# core, so two files compile side by side on a 2-core machine.
+TEST_WORKERS ?= 2
 test: $(STAMP)
-	$(VENV)/bin/python -m pytest -q
+	$(VENV)/bin/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile
 
 bench: $(STAMP)
 	$(VENV)/bin/python bench/envs.py

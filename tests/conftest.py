@@ -9,3 +9,17 @@ import jax  # noqa: E402
 _CACHE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), ".jax_cache")
 jax.config.update("jax_compilation_cache_dir", _CACHE)
 jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
+
+# Files whose fixtures compile the whole training chunk or fit models run first, so that with
+# `pytest -n 2 --dist loadfile` (make test) the long files start at once on both workers
+# and the short ones fill in around them.
+_SLOW_FIRST = ("test_train.py", "test_sharding.py", "test_segmentation_pipeline.py",
+               "test_analysis.py", "test_envs_render.py")
+
+
+def pytest_collection_modifyitems(config, items):
+    def rank(item):
+        name = os.path.basename(str(item.fspath))
+        return _SLOW_FIRST.index(name) if name in _SLOW_FIRST else len(_SLOW_FIRST)
+
+    items.sort(key=rank)  # stable: keeps the order inside each file
