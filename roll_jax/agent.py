@@ -3,7 +3,10 @@
 ROLL (paper Fig. 1): obs = scene-VAE(I); goal/achieved = LSTM(object-VAE(segment(I))).
 Ablations (paper "Ablations"): no LSTM -> object-VAE latents directly; no object-VAE -> the
 scene-VAE encodes the (unsegmented) image for the LSTM; no matching loss -> same encoders,
-trained without it. Skew-Fit: the scene-VAE encodes everything.
+trained without it, neither the LSTM's nor the object-VAE's ("does not add the matching loss
+to the LSTM output or the object-VAE latent embedding"); no LSTM also drops the object-VAE's
+matching loss (the paper's "ROLL without LSTM and matching loss"). Skew-Fit: the scene-VAE
+encodes everything and goals come from the skewed replay buffer (loop.fresh_goals).
 
 `GoalEncoder` is a static description (built from the config, hashable); its methods are pure
 functions of explicit parameters so that the loop, evaluation and analysis share them.
@@ -40,6 +43,9 @@ class GoalEncoder:
     object_cfg: VAEConfig | None  # None: the scene-VAE encodes goal frames (no-object-VAE, Skew-Fit)
     segment: bool  # segment images before the frame encoder
     lstm: bool  # run the LSTM over the per-frame latents
+    # Fresh goals (exploration, HER's fresh share) from the replay buffer skewed by p(x)^alpha
+    # (Skew-Fit) instead of the prior (ROLL's Algorithm 1); see loop.fresh_goals.
+    skewed_goals: bool = False
 
     @property
     def frame_dim(self) -> int:
@@ -84,7 +90,11 @@ class GoalEncoder:
 def goal_encoder(cfg) -> GoalEncoder:
     """The GoalEncoder of a TrainConfig (algo + ablation flags)."""
     if cfg.algo == "skewfit":
-        return GoalEncoder(cfg.scene, None, segment=False, lstm=False)
+        return GoalEncoder(cfg.scene, None, segment=False, lstm=False, skewed_goals=True)
     if not cfg.use_object_vae:
         return GoalEncoder(cfg.scene, None, segment=False, lstm=True)
-    return GoalEncoder(cfg.scene, cfg.object_vae, segment=True, lstm=cfg.use_lstm)
+    object_cfg = cfg.object_vae
+    if not (cfg.matching_loss and cfg.use_lstm):
+        # Pretraining fits the object-VAE from this config, so the ablation reaches it too.
+        object_cfg = dataclasses.replace(object_cfg, matching_coef=0.0)
+    return GoalEncoder(cfg.scene, object_cfg, segment=True, lstm=cfg.use_lstm)

@@ -3,9 +3,10 @@
 A chunk, for one seed (the seed axis is a vmap over all of it):
   1. `episodes_per_epoch` x `horizon` steps of all envs in a `lax.scan`: scene-VAE encodes the
      rendered image, the policy acts (uniformly at random before learning starts), MJX steps,
-     the renderer draws;
+     the renderer draws; exploration goals: ROLL from the object-VAE prior through the LSTM,
+     Skew-Fit from the skewed replay distribution (`fresh_goals`);
   2. per finished episode: `segment` the frames, encode them (object-VAE, LSTM), store the
-     whole trajectories with cached latents in the replay buffer;
+     whole trajectories with cached latents and Skew-Fit log p(x) in the replay buffer;
   3. 2 SAC updates per collected transition on HER-relabeled batches (rlkit's order: collect
      the epoch's steps, then train);
   4. scheduled scene-VAE training on Skew-Fit-skewed replay images and online LSTM training
@@ -40,6 +41,10 @@ class TrainState:
     scene_vae: encoders.VAEState
     lstm: Any  # encoders.LSTMState, or None without LSTM
     buffer: replay.ReplayBuffer
+    # float32 [N, T+1]: Skew-Fit's log p(x) of every stored scene image under the current
+    # scene-VAE (written with each episode, recomputed after each scene-VAE training), so that
+    # skewed sampling never runs the VAE; unfilled slots are ignored (buffer.size).
+    skew_log_p: jax.Array
     env_state: Any  # EnvState batched over envs [E]
     key: jax.Array
     env_steps: jax.Array  # int32, per seed
@@ -84,6 +89,7 @@ def init_state(key, cfg: TrainConfig, env, scene_vae: encoders.VAEState, lstm) -
                                 enc.goal_dim)
     env_state = jax.vmap(env.reset)(jax.random.split(k_env, cfg.n_envs))
     return TrainState(sac=sac_state, scene_vae=scene_vae, lstm=lstm, buffer=buffer,
+                      skew_log_p=jnp.zeros(buffer.images.shape[:2], jnp.float32),
                       env_state=env_state, key=k_run, env_steps=jnp.zeros((), jnp.int32),
                       epoch=jnp.zeros((), jnp.int32))
 
@@ -96,12 +102,14 @@ def scene_latents(cfg: TrainConfig, params, images):
 
 def collect_episode(cfg: TrainConfig, env, enc: GoalEncoder, frozen: Frozen, state: TrainState,
                     key, act_random):
-    """One episode of all E envs -> (env_state, replay.Trajectory [E, ...], metrics)."""
-    k_reset, k_goal, k_act = jax.random.split(key, 3)
+    """One episode of all E envs -> (env_state, replay.Trajectory [E, ...], Skew-Fit log p(x)
+    of its scene images [E, T+1], metrics)."""
+    k_reset, k_goal, k_act, k_lp = jax.random.split(key, 4)
     lstm_params = None if state.lstm is None else state.lstm.params
     env_state = jax.vmap(env.reset_episode)(state.env_state,
                                             jax.random.split(k_reset, cfg.n_envs))
-    goals = enc.prior_goals(k_goal, lstm_params, cfg.n_envs)  # Algorithm 1: z_g from the prior
+    cdf = skew_cdf(state.skew_log_p, cfg.skew_alpha, state.buffer.size) if enc.skewed_goals else None
+    goals = fresh_goals(enc, state.buffer, cdf, lstm_params, k_goal, cfg.n_envs)
     rgb0 = jax.vmap(env.render)(env_state)
     scene_params = state.scene_vae.params
 
@@ -126,18 +134,30 @@ def collect_episode(cfg: TrainConfig, env, enc: GoalEncoder, frozen: Frozen, sta
         images=images, object_images=goal_imgs, actions=actions.swapaxes(0, 1),
         obs_latents=scene_latents(cfg, scene_params, images), goal_latents=achieved,
         rollout_goals=goals)
+    log_p = frame_log_p(cfg, scene_params, images, k_lp)
     final_dist = jnp.sum(jnp.square(achieved[:, -1] - goals), -1)
-    return env_state, traj, {"rollout_latent_dist": final_dist.mean()}
+    return env_state, traj, log_p, {"rollout_latent_dist": final_dist.mean()}
+
+
+def store_episodes(state: TrainState, traj: replay.Trajectory, log_p) -> TrainState:
+    """Add E episodes to the buffer and their log p(x) [E, T+1] to the same ring slots."""
+    e = traj.actions.shape[0]
+    slots = (state.buffer.insert_pos + jnp.arange(e, dtype=jnp.int32)) % state.buffer.capacity
+    return state.replace(buffer=replay.add_trajectories(state.buffer, traj),
+                         skew_log_p=state.skew_log_p.at[slots].set(log_p.astype(jnp.float32)))
 
 
 def sac_updates(cfg: TrainConfig, enc: GoalEncoder, state: TrainState, key, n_updates: int):
-    """`n_updates` SAC updates on HER batches (prior goals sampled fresh per batch)."""
+    """`n_updates` SAC updates on HER batches; the fresh-goal share is drawn per batch by
+    `fresh_goals` (the buffer does not change during the updates, so the Skew-Fit sampling
+    CDF is built once)."""
     lstm_params = None if state.lstm is None else state.lstm.params
+    cdf = skew_cdf(state.skew_log_p, cfg.skew_alpha, state.buffer.size) if enc.skewed_goals else None
 
     def body(s, k):
         k_goal, k_batch, k_upd = jax.random.split(k, 3)
-        prior = enc.prior_goals(k_goal, lstm_params, cfg.sac.batch_size)
-        batch = replay.sample_transitions(state.buffer, k_batch, cfg.sac.batch_size, prior,
+        fresh = fresh_goals(enc, state.buffer, cdf, lstm_params, k_goal, cfg.sac.batch_size)
+        batch = replay.sample_transitions(state.buffer, k_batch, cfg.sac.batch_size, fresh,
                                           cfg.sac.goal_fracs)
         s, m = sac.sac_update(s, k_upd, batch, cfg.sac)
         m["reward"] = batch.reward.mean()
@@ -163,25 +183,70 @@ def log_likelihood(cfg: TrainConfig, params, images, key):
     return jax.nn.logsumexp(log_px_z + log_pz - log_qz, axis=0) - math.log(k)
 
 
+def frame_log_p(cfg: TrainConfig, params, images, key, batch_size: int = 256):
+    """`log_likelihood` of every image [..., H, W, 3] -> [...], one key per image, batched."""
+    lead = images.shape[:-3]
+    flat = images.reshape((-1,) + images.shape[-3:])
+    n = flat.shape[0]
+    keys = jax.random.split(key, n)
+    log_p = jax.lax.map(lambda xk: log_likelihood(cfg, params, xk[0][None], xk[1])[0],
+                        (flat, keys), batch_size=min(batch_size, n))
+    return log_p.reshape(lead)
+
+
 def skew_weights(log_p, alpha: float, valid):
     """Skew-Fit sampling weights p(x)^alpha over the buffer, normalised (log-space; invalid
-    slots get 0)."""
+    slots get 0, all zeros when no slot is valid)."""
     logw = jnp.where(valid, alpha * log_p, -jnp.inf)
-    return jax.nn.softmax(logw.reshape(-1)).reshape(log_p.shape)
+    w = jax.nn.softmax(logw.reshape(-1)).reshape(log_p.shape)
+    return jnp.where(valid, w, 0.0)  # softmax of all -inf is NaN
+
+
+def filled_frames(log_p, size):
+    """bool [N, T+1]: frames of the first `size` trajectory slots (the filled ones)."""
+    n, t1 = log_p.shape
+    return jnp.broadcast_to((jnp.arange(n) < size)[:, None], (n, t1))
+
+
+def skew_cdf(log_p, alpha: float, size):
+    """Cumulative Skew-Fit weights over the flattened buffer frames [N * (T+1)] (all zeros for
+    an empty buffer): built once per phase so each draw is a binary search, not a
+    categorical over the whole buffer."""
+    return jnp.cumsum(skew_weights(log_p, alpha, filled_frames(log_p, size)).reshape(-1))
+
+
+def sample_frames(key, cdf, n: int):
+    """n flat frame indices drawn with probability cdf[i] - cdf[i-1] (inverse CDF)."""
+    u = jax.random.uniform(key, (n,)) * cdf[-1]
+    # side="right": a zero-weight frame (cdf[i] == cdf[i-1]) is never hit.
+    return jnp.minimum(jnp.searchsorted(cdf, u, side="right"), cdf.shape[0] - 1)
+
+
+def fresh_goals(enc: GoalEncoder, buffer: replay.ReplayBuffer, cdf, lstm_params, key, n: int):
+    """n goals for exploration and for the fresh-goal share of HER relabeling.
+
+    ROLL (Algorithm 1): the object-VAE prior N(0, I) through the LSTM (`prior_goals`).
+    Skew-Fit (rlkit's `custom_goal_sampler`): achieved-goal latents of buffer frames drawn
+    with probability p(x)^alpha (`cdf` from `skew_cdf`; the cached latents are refreshed with
+    the VAE); the scene-VAE prior N(0, I) while the buffer is still empty.
+    """
+    if not enc.skewed_goals:
+        return enc.prior_goals(key, lstm_params, n)
+    k_prior, k_buf = jax.random.split(key)
+    flat = sample_frames(k_buf, cdf, n)
+    t1 = buffer.goal_latents.shape[1]
+    replay_goals = buffer.goal_latents[flat // t1, flat % t1]
+    return jnp.where(buffer.size > 0, replay_goals, enc.prior_goals(k_prior, lstm_params, n))
 
 
 def train_scene_vae(cfg: TrainConfig, state: TrainState, key, n_batches):
-    """`n_batches` scene-VAE steps on replay images drawn with Skew-Fit weights."""
+    """`n_batches` scene-VAE steps on replay images drawn with Skew-Fit weights (from the
+    stored log p(x) under the current VAE), then log p(x) of the whole buffer under the
+    trained VAE (rlkit recomputes its priorities after training too)."""
     buf = state.buffer
     k_lp, k_train = jax.random.split(key)
-    n, t1 = buf.images.shape[:2]
-    flat = buf.images.reshape((n * t1,) + buf.images.shape[2:])
-    keys = jax.random.split(k_lp, n * t1)
-    log_p = jax.lax.map(lambda xk: log_likelihood(cfg, state.scene_vae.params, xk[0][None],
-                                                  xk[1])[0],
-                        (flat, keys), batch_size=min(256, n * t1)).reshape(n, t1)
-    valid = jnp.broadcast_to((jnp.arange(n) < buf.size)[:, None], (n, t1))
-    weights = skew_weights(log_p, cfg.skew_alpha, valid)
+    weights = skew_weights(state.skew_log_p, cfg.skew_alpha,
+                           filled_frames(state.skew_log_p, buf.size))
 
     def body(i, carry):
         vs, loss = carry
@@ -191,27 +256,37 @@ def train_scene_vae(cfg: TrainConfig, state: TrainState, key, n_batches):
         return vs, loss + m["loss"]
 
     vs, loss_sum = jax.lax.fori_loop(0, n_batches, body, (state.scene_vae, jnp.float32(0)))
-    return state.replace(scene_vae=vs), {"vae_loss": loss_sum / jnp.maximum(n_batches, 1)}
+    log_p = frame_log_p(cfg, vs.params, buf.images, k_lp)
+    return (state.replace(scene_vae=vs, skew_log_p=log_p),
+            {"vae_loss": loss_sum / jnp.maximum(n_batches, 1)})
+
+
+def lstm_online_batch(cfg: TrainConfig, enc: GoalEncoder, frozen: Frozen, scene_params, key,
+                      goal_images):
+    """Inputs of one online LSTM step for trajectories of goal images [B, T, H, W, 3]: their
+    frame latents [B, T, d] and, unless the matching loss is ablated, one occluded frame per
+    trajectory (encoders.Occlusion; else None)."""
+    lat = enc.frame_latents(frozen, scene_params, goal_images)
+    if not cfg.matching_loss:
+        return lat, None
+    if enc.object_cfg is not None:
+        params, frame_cfg = frozen.object_vae, enc.object_cfg
+    else:
+        params, frame_cfg = scene_params, enc.scene_cfg
+    return lat, encoders.make_occlusion(key, params, frame_cfg, goal_images, cfg.lstm)
 
 
 def train_lstm(cfg: TrainConfig, enc: GoalEncoder, frozen: Frozen, state: TrainState, key,
                n_batches):
     """`n_batches` online LSTM steps on trajectories drawn uniformly from the buffer: the
     auto-encoder loss, plus the matching loss unless ablated."""
-    frame_cfg = enc.object_cfg or enc.scene_cfg
-
-    def frame_params(s):
-        return frozen.object_vae if enc.object_cfg is not None else s.scene_vae.params
 
     def body(i, carry):
         s, loss = carry
         k_s, k_occ, k_step = jax.random.split(jax.random.fold_in(key, i), 3)
         tr = replay.sample_trajectories(s.buffer, k_s, cfg.lstm.online_batch_size)
-        lat = encoders.encode_mean(frame_params(s), frame_cfg, tr.object_images)
-        occ = None
-        if cfg.matching_loss:
-            occ = encoders.make_occlusion(k_occ, frame_params(s), frame_cfg, tr.object_images,
-                                          cfg.lstm)
+        lat, occ = lstm_online_batch(cfg, enc, frozen, s.scene_vae.params, k_occ,
+                                     tr.object_images)
         ls, m = encoders.lstm_train_step(s.lstm, k_step, lat, cfg.lstm, occ)
         return s.replace(lstm=ls), loss + m["loss"]
 
@@ -244,9 +319,9 @@ def make_chunk(cfg: TrainConfig, env):
         key, k_col, k_sac, k_vae, k_lstm = jax.random.split(state.key, 5)
 
         def episode(s, k):
-            es, traj, m = collect_episode(cfg, env, enc, frozen, s, k, plan.act_random)
-            s = s.replace(env_state=es, buffer=replay.add_trajectories(s.buffer, traj),
-                          env_steps=s.env_steps + cfg.n_envs * cfg.horizon)
+            es, traj, log_p, m = collect_episode(cfg, env, enc, frozen, s, k, plan.act_random)
+            s = store_episodes(s, traj, log_p).replace(
+                env_state=es, env_steps=s.env_steps + cfg.n_envs * cfg.horizon)
             return s, m
 
         state, col_m = jax.lax.scan(episode, state,

@@ -1,0 +1,218 @@
+"""Skew-Fit goals from the skewed replay distribution (vs a NumPy reference), and what each
+ROLL ablation flag changes in the encoders and their online losses. Tiny shapes; the training
+chunk is not compiled here (tests/test_train.py does that)."""
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy import stats
+
+from configs.encoders import VAEConfig
+from configs.train import make_config
+from roll_jax import encoders, loop, losses, replay
+from roll_jax.agent import Frozen, GoalEncoder, goal_encoder
+
+CAP, T, HW, A, DG = 5, 3, 4, 2, 2
+T1 = T + 1
+TINY_VAE = VAEConfig(latent_dim=DG, beta=1.0, feature_dim=4)
+SKEWFIT = GoalEncoder(TINY_VAE, None, segment=False, lstm=False, skewed_goals=True)
+PRIOR = GoalEncoder(TINY_VAE, None, segment=False, lstm=False)
+
+
+def _buffer(size):
+    """A buffer whose goal latent of frame (n, t) is (n * T1 + t, 0): draws are identifiable."""
+    buf = replay.init_buffer(CAP, T, (HW, HW, 3), A, DG, DG)
+    ids = np.arange(CAP * T1, dtype=np.float32).reshape(CAP, T1)
+    goals = np.stack([ids, np.zeros_like(ids)], -1)
+    return buf.replace(goal_latents=jnp.asarray(goals), size=jnp.int32(size))
+
+
+def _np_weights(log_p, alpha, size):
+    valid = np.broadcast_to((np.arange(log_p.shape[0]) < size)[:, None], log_p.shape)
+    if not valid.any():
+        return np.zeros(log_p.shape)
+    logw = np.where(valid, alpha * log_p.astype(np.float64), -np.inf)
+    w = np.exp(logw - logw[valid].max())
+    return w / w.sum()
+
+
+@pytest.mark.parametrize("alpha, size", [(-1.0, 3), (-0.5, CAP), (-1.0, 0)])
+def test_skew_weights_match_numpy(alpha, size):
+    log_p = np.random.default_rng(0).normal(-50.0, 3.0, (CAP, T1)).astype(np.float32)
+    valid = loop.filled_frames(jnp.asarray(log_p), size)
+    w = np.asarray(loop.skew_weights(jnp.asarray(log_p), alpha, valid))
+    np.testing.assert_allclose(w, _np_weights(log_p, alpha, size), rtol=1e-5, atol=1e-12)
+    assert np.all(w[size:] == 0)  # empty slots are never drawn
+    cdf = np.asarray(loop.skew_cdf(jnp.asarray(log_p), alpha, size))
+    np.testing.assert_allclose(cdf, np.cumsum(w), rtol=1e-5, atol=1e-7)
+
+
+@functools.partial(jax.jit, static_argnums=(0, 4))
+def _fresh(enc, buf, cdf, key, n):
+    return loop.fresh_goals(enc, buf, cdf, None, key, n)
+
+
+def test_skewed_goal_frequencies_match_weights():
+    size, alpha, n = 3, -1.0, 40_000
+    log_p = np.random.default_rng(1).normal(0.0, 1.0, (CAP, T1)).astype(np.float32)
+    buf = _buffer(size)
+    cdf = loop.skew_cdf(jnp.asarray(log_p), alpha, size)
+    goals = np.asarray(_fresh(SKEWFIT, buf, cdf, jax.random.PRNGKey(0), n))
+    assert np.all(goals[:, 1] == 0)
+    counts = np.bincount(goals[:, 0].astype(int), minlength=CAP * T1)
+    expected = _np_weights(log_p, alpha, size).reshape(-1) * n
+    assert counts[expected == 0].sum() == 0  # unfilled slots
+    hit = expected > 0
+    chi2 = np.sum((counts[hit] - expected[hit]) ** 2 / expected[hit])
+    assert stats.chi2.sf(chi2, hit.sum() - 1) > 1e-3, (counts, expected)
+
+
+def test_fresh_goals_fall_back_to_prior_per_seed():
+    """Under the seed vmap, an empty buffer (first episodes) gives N(0, I) goals and a filled
+    one gives buffer frames; ROLL's goals stay the prior whatever the buffer holds."""
+    log_p = jnp.zeros((CAP, T1))
+    bufs = jax.tree.map(lambda a, b: jnp.stack([a, b]), _buffer(0), _buffer(2))
+    cdfs = jax.vmap(lambda b: loop.skew_cdf(log_p, -1.0, b.size))(bufs)
+    goals = np.asarray(jax.vmap(lambda b, c: loop.fresh_goals(SKEWFIT, b, c, None,
+                                                              jax.random.PRNGKey(3), 4000))(bufs, cdfs))
+    empty, filled = goals
+    assert abs(empty.mean()) < 0.05 and abs(empty.std() - 1) < 0.05
+    assert set(np.unique(filled[:, 0]).astype(int)) == set(range(2 * T1))  # uniform when log_p equal
+    key = jax.random.PRNGKey(4)
+    np.testing.assert_array_equal(_fresh(PRIOR, _buffer(3), None, key, 8),
+                                  PRIOR.prior_goals(key, None, 8))
+
+
+def test_store_episodes_writes_log_p_to_the_ring_slots():
+    state = loop.TrainState(sac=None, scene_vae=None, lstm=None,
+                            buffer=replay.init_buffer(CAP, T, (HW, HW, 3), A, DG, DG),
+                            skew_log_p=jnp.zeros((CAP, T1)), env_state=None, key=None,
+                            env_steps=None, epoch=None)
+    store = jax.jit(loop.store_episodes)
+    for first in (0, 2, 4):  # slots 0,1 / 2,3 / 4,0
+        ids = jnp.arange(first, first + 2, dtype=jnp.float32)
+        traj = replay.Trajectory(
+            images=jnp.zeros((2, T1, HW, HW, 3), jnp.uint8),
+            object_images=jnp.zeros((2, T1, HW, HW, 3), jnp.uint8),
+            actions=jnp.broadcast_to(ids[:, None, None], (2, T, A)),
+            obs_latents=jnp.zeros((2, T1, DG)), goal_latents=jnp.zeros((2, T1, DG)),
+            rollout_goals=jnp.zeros((2, DG)))
+        state = store(state, traj, jnp.broadcast_to(-ids[:, None], (2, T1)))
+    np.testing.assert_array_equal(state.buffer.actions[:, 0, 0], [5, 1, 2, 3, 4])
+    np.testing.assert_array_equal(state.skew_log_p, -np.broadcast_to(
+        np.asarray(state.buffer.actions[:, :1, 0]), (CAP, T1)))
+
+
+# ----------------------------------------------------------------------------- ablations
+
+FLAGS = {"roll": {}, "no_matching_loss": {"matching_loss": False},
+         "no_lstm": {"use_lstm": False}, "no_object_vae": {"use_object_vae": False}}
+B, TT = 2, 4  # trajectories, frames per trajectory
+
+
+@pytest.fixture(scope="module")
+def data():
+    cfg = make_config("puck_push", "roll", "smoke")
+    k_o, k_s, k_img = jax.random.split(jax.random.PRNGKey(0), 3)
+    rgb = jax.random.randint(k_img, (B, TT, 48, 48, 3), 1, 256).astype(jnp.uint8)
+    blob = np.zeros((48, 48), bool)
+    blob[10:20, 12:24] = True  # the "object" of the segmented images
+    seg = jnp.where(jnp.asarray(blob)[..., None], rgb, 0).astype(jnp.uint8)
+    return {"object": encoders.init_vae(k_o, cfg.object_vae).params,
+            "scene": encoders.init_vae(k_s, cfg.scene).params, "rgb": rgb, "seg": seg}
+
+
+def _norms(tree):
+    return {k: float(sum(jnp.sum(jnp.square(x)) for x in jax.tree.leaves(v)))
+            for k, v in tree["params"].items()}
+
+
+def _lstm_loss(cfg, enc, lstm_params, vae_params, images):
+    """The online LSTM loss as train_lstm builds it (lstm_online_batch + lstm_train_step's
+    loss), differentiable in the LSTM and in the frame encoder's parameters."""
+    frozen = Frozen(seg=None, object_vae=vae_params if enc.object_cfg is not None else None)
+    lat, occ = loop.lstm_online_batch(cfg, enc, frozen, vae_params, jax.random.PRNGKey(5), images)
+    return losses.lstm_loss(lstm_params, encoders.lstm_model(cfg.lstm), lat,
+                            None if occ is None else occ.latent, None if occ is None else occ.t,
+                            matching_coef=cfg.lstm.matching_coef, ae_coef=cfg.lstm.ae_coef,
+                            one_sided=cfg.lstm.matching_one_sided)
+
+
+@pytest.mark.parametrize("variant", list(FLAGS))
+def test_ablation_changes_exactly_its_part(variant, data):
+    cfg = make_config("puck_push", "roll", "smoke", **FLAGS[variant])
+    enc = goal_encoder(cfg)
+    obj_latent, scene_latent = cfg.object_vae.latent_dim, cfg.scene.latent_dim
+    # Structure: which encoders exist and what the LSTM sees.
+    assert not enc.skewed_goals  # ROLL keeps prior goals
+    assert enc.segment == (variant != "no_object_vae")
+    assert enc.lstm == (variant != "no_lstm")
+    assert (enc.object_cfg is None) == (variant == "no_object_vae")
+    assert enc.frame_dim == (scene_latent if variant == "no_object_vae" else obj_latent)
+    # Object-VAE matching loss: on for ROLL only ("without matching loss" drops it on both
+    # the LSTM and the object-VAE; "without LSTM and matching loss" too).
+    if enc.object_cfg is not None:
+        want = cfg.object_vae.matching_coef if variant == "roll" else 0.0
+        assert cfg.object_vae.matching_coef > 0 and enc.object_cfg.matching_coef == want
+        assert enc.object_cfg.latent_dim == obj_latent
+    if not enc.lstm:
+        assert all(loop.plan_chunk(cfg, e).lstm_batches == 0 for e in range(4))
+        x = jnp.ones((TT, enc.frame_dim))
+        assert enc.sequence(None, x) is x and enc.goal_dim == obj_latent
+        return
+    assert any(loop.plan_chunk(cfg, e).lstm_batches > 0 for e in range(4))
+    lstm = encoders.init_lstm(jax.random.PRNGKey(1), cfg.lstm, enc.frame_dim)
+    for gate in ("ii", "if", "ig", "io"):  # input kernels of the first cell: [frame_dim, hidden]
+        assert lstm.params["params"]["cells_0"][gate]["kernel"].shape[0] == enc.frame_dim
+    vae_params = data["object"] if enc.object_cfg is not None else data["scene"]
+    images = data["seg"] if enc.segment else data["rgb"]
+    fn = jax.jit(jax.grad(functools.partial(_lstm_loss, cfg, enc), argnums=(0, 1), has_aux=True))
+    (g_lstm, g_vae), m = fn(lstm.params, vae_params, images)
+    # Every LSTM part learns; the frozen frame encoder gets nothing from the LSTM loss.
+    assert all(v > 0 for v in _norms(g_lstm).values()), _norms(g_lstm)
+    assert all(v == 0 for v in _norms(g_vae).values())
+    if variant == "no_matching_loss":
+        assert "matching" not in m and float(m["loss"]) == float(cfg.lstm.ae_coef * m["ae"])
+    else:
+        assert float(m["matching"]) > 0
+        np.testing.assert_allclose(m["loss"], cfg.lstm.ae_coef * m["ae"]
+                                   + cfg.lstm.matching_coef * m["matching"], rtol=1e-6)
+        # The matching term alone moves the LSTM.
+        match_only = jax.jit(jax.grad(lambda p: _lstm_loss(
+            cfg, enc, p, vae_params, images)[1]["matching"]))(lstm.params)
+        assert all(v > 0 for v in _norms(match_only).values())
+
+
+@pytest.mark.parametrize("variant", ["roll", "no_matching_loss", "no_lstm"])
+def test_object_vae_matching_gradient(variant, data):
+    """The object-VAE pretraining loss (vae_train_step with the encoder's config): its matching
+    term moves every encoder part for ROLL and is exactly zero under the ablations."""
+    ocfg = goal_encoder(make_config("puck_push", "roll", "smoke", **FLAGS[variant])).object_cfg
+    imgs = data["seg"][0]
+    occ = losses.occlude(jax.random.PRNGKey(2), imgs, None, ocfg.occlusion_drop)
+    grad = jax.jit(jax.grad(lambda p, c: c * losses.vae_matching_loss(
+        p, encoders.vae_model(ocfg), imgs, occ, ocfg.matching_one_sided)))
+    norms = _norms(grad(data["object"], ocfg.matching_coef))
+    means = [k for k in norms if k.startswith("convs_") or k in ("feature", "mean_head")]
+    if variant == "roll":  # the encoder-mean path only: the loss compares means
+        assert len(means) > 2 and all(norms[k] > 0 for k in means), norms
+        assert all(norms[k] == 0 for k in norms if k not in means)
+    else:
+        assert all(v == 0 for v in norms.values())
+    _, m = jax.jit(encoders.vae_train_step, static_argnames="cfg")(
+        encoders.VAEState(data["object"], encoders.vae_optimizer(ocfg).init(data["object"]),
+                          jnp.int32(0)), jax.random.PRNGKey(3), imgs, cfg=ocfg)
+    assert ("matching" in m) == (variant == "roll")
+
+
+def test_skewfit_has_no_lstm_object_vae_or_segmentation():
+    cfg = make_config("puck_push", "skewfit", "smoke")
+    enc = goal_encoder(cfg)
+    assert enc.skewed_goals and not enc.lstm and not enc.segment and enc.object_cfg is None
+    assert enc.goal_dim == cfg.scene.latent_dim == 4  # Table 2: Skew-Fit puck latent size
+    assert all(loop.plan_chunk(cfg, e).lstm_batches == 0 for e in range(4))
+    rgb = jnp.zeros((2, 48, 48, 3), jnp.uint8)
+    assert enc.goal_images(Frozen(seg=None, object_vae=None), rgb) is rgb
