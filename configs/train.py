@@ -105,6 +105,12 @@ class TrainConfig:
         if not self.use_lstm and not self.use_object_vae:
             raise ValueError("--no-lstm and --no-object-vae together remove the whole object "
                              "encoder; pick one")
+        if self.algo == "roll" and self.use_lstm and self.scene_vae is not None:
+            frame = self.scene_vae if not self.use_object_vae else self.object_vae
+            if frame is not None and self.lstm.out_dim != frame.latent_dim:
+                which = "scene" if not self.use_object_vae else "object"
+                raise ValueError(f"lstm.out_dim={self.lstm.out_dim} must equal the {which}-VAE "
+                                 f"latent size {frame.latent_dim}: the LSTM reconstructs its input")
         if self.sac.replay_size < self.horizon:
             raise ValueError(f"replay_size={self.sac.replay_size} holds no whole episode of "
                              f"horizon {self.horizon}")
@@ -165,4 +171,8 @@ def make_config(task: str, algo: str = "roll", preset: str = "paper", **override
     if smoke:
         values.update(SMOKE_TRAIN)
     values.update(overrides)
+    if not values.get("use_object_vae", True) and "lstm" not in overrides:
+        # --no-object-vae: the LSTM runs on (and reconstructs) scene-VAE latents.
+        values["lstm"] = dataclasses.replace(values["lstm"],
+                                             out_dim=values["scene_vae"].latent_dim)
     return TrainConfig(task=task, algo=algo, preset=preset, **values)

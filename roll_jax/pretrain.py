@@ -145,7 +145,11 @@ def _meta(cfg: TrainConfig) -> dict:
     return {"version": CHECKPOINT_VERSION, "task": cfg.task, "algo": cfg.algo,
                 "image_shape": list(cfg.scene.image_shape), "scene_latent": cfg.scene.latent_dim,
                 "object_latent": None if enc.object_cfg is None else enc.object_cfg.latent_dim,
-                "lstm": enc.lstm}
+                "lstm": enc.lstm,
+                # The ablations train the object-VAE without its matching loss: a checkpoint
+                # trained with it must not serve them (nor the reverse).
+                "object_matching_coef": None if enc.object_cfg is None
+                else enc.object_cfg.matching_coef}
 
 
 def save(path: str, cfg: TrainConfig, pre: Pretrained) -> None:
@@ -171,7 +175,8 @@ def load(path: str, cfg: TrainConfig) -> Pretrained:
 
     path, meta = read_meta(path, "encoder")
     want = _meta(cfg)
-    for k in ("task", "image_shape", "scene_latent", "object_latent", "lstm"):
+    for k in ("task", "image_shape", "scene_latent", "object_latent", "lstm",
+              "object_matching_coef"):
         if meta.get(k) != want[k]:
             raise ValueError(f"encoder checkpoint {path} has {k}={meta.get(k)!r}, but this run "
                              f"needs {k}={want[k]!r}")

@@ -2,7 +2,9 @@
 ROLL ablation flag changes in the encoders and their online losses. Tiny shapes; the training
 chunk is not compiled here (tests/test_train.py does that)."""
 
+import dataclasses
 import functools
+import os
 
 import jax
 import jax.numpy as jnp
@@ -14,6 +16,7 @@ from configs.encoders import VAEConfig
 from configs.train import make_config
 from roll_jax import encoders, loop, losses, replay
 from roll_jax.agent import Frozen, GoalEncoder, goal_encoder
+from roll_jax.checkpoint import write_meta
 
 CAP, T, HW, A, DG = 5, 3, 4, 2, 2
 T1 = T + 1
@@ -216,3 +219,24 @@ def test_skewfit_has_no_lstm_object_vae_or_segmentation():
     assert all(loop.plan_chunk(cfg, e).lstm_batches == 0 for e in range(4))
     rgb = jnp.zeros((2, 48, 48, 3), jnp.uint8)
     assert enc.goal_images(Frozen(seg=None, object_vae=None), rgb) is rgb
+
+
+def test_no_object_vae_lstm_reconstructs_scene_latents_on_every_task():
+    from configs.train import TASKS
+
+    for task in TASKS:
+        cfg = make_config(task, "roll", "smoke", use_object_vae=False)
+        assert cfg.lstm.out_dim == cfg.scene.latent_dim, task
+    with pytest.raises(ValueError, match="lstm.out_dim=6 must equal the scene-VAE latent size 16"):
+        dataclasses.replace(make_config("door_open", "roll", "smoke"), use_object_vae=False)
+
+
+def test_encoder_checkpoint_of_full_roll_is_refused_by_the_matching_ablation(tmp_path):
+    from roll_jax import pretrain
+
+    full = make_config("hurdle_top", "roll", "smoke")
+    ablated = make_config("hurdle_top", "roll", "smoke", matching_loss=False)
+    os.makedirs(tmp_path / "enc")
+    write_meta(str(tmp_path / "enc"), pretrain._meta(full))
+    with pytest.raises(ValueError, match="object_matching_coef"):
+        pretrain.load(str(tmp_path / "enc"), ablated)
