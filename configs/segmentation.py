@@ -28,6 +28,11 @@ class SegmentationConfig:
     unet_weight_decay: float = 5e-4  # Appendix B.1
     unet_batch_size: int = 8  # not in the paper (ours): small batches, many SGD steps at lr 1e-3
     distractor_prob: float = 0.5  # not in the paper: share of training images with a pasted distractor
+    # Not in the paper: share of distractors centred on a robot pixel (the object touching or in
+    # front of the arm) and their largest radius in px at 48x48. door_open: 0.5 and 12 (its
+    # object is large and always at the hand; with 0 / 8 the U-Net called the door robot).
+    distractor_near_robot: float = 0.0
+    distractor_max_radius: float = 8.0
     robot_threshold: float = 0.5  # U-Net probability above which a pixel is robot (per task)
     # Evaluation.
     eval_states: int = 500  # issue 4: >= 500 random states with a visible object
@@ -42,6 +47,12 @@ class SegmentationConfig:
         if not 0.0 < self.label_background_ratio <= 1.0:
             raise ValueError("SegmentationConfig.label_background_ratio must be in (0, 1], got "
                              f"{self.label_background_ratio}")
+        if not 0.0 <= self.distractor_near_robot <= 1.0:
+            raise ValueError("SegmentationConfig.distractor_near_robot must be in [0, 1], got "
+                             f"{self.distractor_near_robot}")
+        if not self.distractor_max_radius >= 1.5:
+            raise ValueError("SegmentationConfig.distractor_max_radius must be >= 1.5 px, got "
+                             f"{self.distractor_max_radius}")
         if not 0.0 <= self.distractor_prob <= 1.0:
             raise ValueError(f"SegmentationConfig.distractor_prob must be in [0, 1], got {self.distractor_prob}")
 
@@ -52,9 +63,12 @@ SMOKE = {"n_frames": 300, "n_envs": 30, "unet_features": 8, "unet_epochs": 3, "e
 _N_FRAMES = {"puck_push": 2000, "hurdle_bottom": 2000, "hurdle_top": 2000, "door_open": 4000,
              "pickup": 4000}
 # Per-task U-Net probability threshold (our calibration, see docs/segmentation.md).
-_ROBOT_THRESHOLD: dict[str, float] = {"puck_push": 0.3, "hurdle_bottom": 0.1, "hurdle_top": 0.1}
+_ROBOT_THRESHOLD: dict[str, float] = {"puck_push": 0.3, "hurdle_bottom": 0.1, "hurdle_top": 0.1,
+                                      "pickup": 0.2}
 # Per-task robot-label background ratio (our calibration, see docs/segmentation.md).
 _LABEL_BACKGROUND_RATIO: dict[str, float] = {"door_open": 0.5, "pickup": 0.5}
+_DISTRACTORS: dict[str, dict] = {"door_open": {"distractor_near_robot": 0.5,
+                                               "distractor_max_radius": 12.0}}
 PRESETS = ("smoke", "paper")
 
 
@@ -67,6 +81,7 @@ def segmentation_config(task: str, preset: str = "paper", **overrides) -> Segmen
     values = {"n_frames": _N_FRAMES[task]}
     if task in _ROBOT_THRESHOLD:
         values["robot_threshold"] = _ROBOT_THRESHOLD[task]
+    values.update(_DISTRACTORS.get(task, {}))
     if task in _LABEL_BACKGROUND_RATIO:
         values["label_background_ratio"] = _LABEL_BACKGROUND_RATIO[task]
     if preset == "smoke":

@@ -114,3 +114,18 @@ def test_distractors_are_not_robot():
     assert (np.asarray(lab)[changed] == 0).all()
     blob_px = (np.asarray(lab) == 0).sum((1, 2))
     assert blob_px.min() >= 1 and blob_px.max() < 48 * 48 / 4
+
+
+def test_distractors_near_robot_cover_the_robot():
+    images = jnp.zeros((32, 48, 48, 3), jnp.uint8)
+    robot = np.zeros((32, 48, 48), np.float32)
+    robot[:, 40:44, 2:6] = 1.0  # a small "arm" in a corner
+    robot[-1] = 0.0  # no robot pixel: falls back to anywhere
+    robot = jnp.asarray(robot)
+    _, lab = pipeline.paste_distractors(jax.random.PRNGKey(1), images, robot, 1.0,
+                                        near_robot=1.0, max_radius=3.0)
+    lab = np.asarray(lab)
+    # Every blob is centred on an arm pixel, so each image lost some of its arm labels.
+    assert (lab[:-1, 40:44, 2:6] == 0).any(axis=(1, 2)).all()
+    with pytest.raises(ValueError, match="distractor_near_robot"):
+        segmentation_config("door_open", distractor_near_robot=1.5)

@@ -91,16 +91,25 @@ def robot_labels(background: mog2.MOG2Model, frames, background_ratio: float) ->
     return mog2.foreground(labeller, frames, shadows_as_foreground=True)
 
 
-def paste_distractors(key, images, labels, prob: float):
+def paste_distractors(key, images, labels, prob: float, near_robot: float = 0.0,
+                      max_radius: float = 8.0):
     """Paste one object-like blob (ellipse or box, random size and colour) into each image with
-    probability `prob`; its pixels become not-robot. Pure and jittable (per minibatch)."""
+    probability `prob`; its pixels become not-robot. With probability `near_robot` the blob is
+    centred on a robot-labelled pixel (the object touching or in front of the arm, as when the
+    hand holds the door or the ball), otherwise anywhere. Radii are 1.5..`max_radius` px at
+    48x48. Pure and jittable (per minibatch)."""
     n, h, w, _ = images.shape
-    ks = jax.random.split(key, 6)
+    ks = jax.random.split(key, 8)
     use = jax.random.uniform(ks[0], (n,)) < prob
     scale = min(h, w) / 48.0  # sizes below are for 48x48 images
     cy = jax.random.uniform(ks[1], (n,), minval=0, maxval=h)
     cx = jax.random.uniform(ks[2], (n,), minval=0, maxval=w)
-    radii = jax.random.uniform(ks[3], (n, 2), minval=1.5 * scale, maxval=8.0 * scale)
+    robot = labels.reshape(n, -1) > 0.5
+    pick = jax.random.categorical(ks[6], jnp.where(robot, 0.0, -jnp.inf))  # a robot pixel
+    on_robot = (jax.random.uniform(ks[7], (n,)) < near_robot) & robot.any(-1)
+    cy = jnp.where(on_robot, (pick // w).astype(jnp.float32) + 0.5, cy)
+    cx = jnp.where(on_robot, (pick % w).astype(jnp.float32) + 0.5, cx)
+    radii = jax.random.uniform(ks[3], (n, 2), minval=1.5 * scale, maxval=max_radius * scale)
     colour = jax.random.randint(ks[4], (n, 3), 0, 256).astype(jnp.uint8)
     is_box = jax.random.bernoulli(ks[5], 0.5, (n,))
     yy, xx = jnp.mgrid[0:h, 0:w]
@@ -126,7 +135,9 @@ def fit(env, key, cfg: SegmentationConfig, progress=None, frames=None):
         frames = record_empty_scene(env, k_rec, cfg.n_frames, cfg.n_envs)
     background = fit_background(frames, cfg)
     robot = robot_labels(background, frames, cfg.label_background_ratio)
-    augment = lambda k, x, y: paste_distractors(k, x, y, cfg.distractor_prob)
+    augment = lambda k, x, y: paste_distractors(k, x, y, cfg.distractor_prob,
+                                                cfg.distractor_near_robot,
+                                                cfg.distractor_max_radius)
     state, history = unet.fit_unet(k_unet, frames, robot.astype(jnp.float32), cfg,
                                    augment_fn=augment, progress=progress)
     params = SegParams(background=background, unet=state,
