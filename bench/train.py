@@ -1,0 +1,479 @@
+"""Training-loop benchmark: env steps/s of the compiled ROLL chunk and where its time goes.
+
+1. The whole chunk: `loop.compile_chunk` (jit of the seed-vmapped `loop.make_chunk`, state
+   donated: the code path `train.py` runs) for each --seeds count, lowered and compiled ahead
+   of time (compile time reported apart), then --chunks chunks; the first is a warm-up, the
+   second onwards are timed (steady state). env steps/s = seeds x epoch_env_steps / chunk time.
+2. Its parts, each its own jitted function over the same seeds and at the sizes one chunk uses,
+   timed after a warm-up call:
+     sim       episodes x horizon steps of vmap(env.step) (plus env.reset_episode per episode),
+               random actions, in a lax.scan;
+     render    env.render of the same poses: episodes x (horizon + 1) frames per env;
+     segment   `pipeline.segment` (+ the segmented image) of those frames;
+     encoders  scene-VAE means per step (batch n_envs, in a scan, as the policy's observation)
+               and of every stored frame, object-VAE means of the segmented frames, the LSTM over
+               each episode and the episode's prior goal (object-VAE prior -> one LSTM step);
+     log_p     Skew-Fit's importance-sampled log p(x) of every stored frame under the scene-VAE
+               (`loop.frame_log_p`, skew_num_latents decodes per frame), when loop.py has it;
+     policy    the acting policy (sac.select_action, batch n_envs) per step;
+     SAC       `loop.sac_updates`: epoch_env_steps x updates_per_step updates at the config's
+               batch size on the replay buffer the timed chunks filled;
+   the shares are of the sum of these parts. "collect" (`loop.collect_episode` per episode,
+   the chunk's collection phase as one function, without the replay write) is timed too,
+   for comparison (--no-collect skips it).
+
+Networks are the --preset's (paper: SAC 400-300 at batch 1024, the paper's VAEs, U-Net and
+LSTM); only the env steps per chunk (--epoch-env-steps, --n-envs) and the replay capacity
+(--replay-size; SAC samples gather from it, so its size does not change the speed) are cut for
+the CPU. The frozen segmentation (U-Net; MOG2 fitted on a few random frames) and the
+encoders are freshly initialised with random weights: throughput does not depend on training
+them, so no segmentation fitting or pre-training runs. The chunk plan is the steady state after
+`learning_starts`: the policy acts and SAC learns; scheduled scene-VAE / LSTM training is off by
+default (--vae-batches / --lstm-batches switch it on; the compiled chunk holds those branches
+either way).
+
+    python bench/train.py [--task puck_push] [--seeds 1 6] [--preset paper]
+        [--epoch-env-steps 500] [--n-envs 10] [--chunks 3] [--out bench/results/train.json]
+    # the CPU run of bench/results/train.json (2 shared cores, ~14 min):
+    python bench/train.py --n-envs 1 --epoch-env-steps 50 --chunks 3 --reps 1 \
+        --replay-size 10000 --no-collect
+
+Writes bench/results/train.json (device, jax version, sizes, figures).
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import platform
+import statistics
+import sys
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+import jax
+import jax.numpy as jnp
+
+import envs_mjx
+from configs.train import make_config
+from roll_jax import encoders, loop, sac
+from roll_jax.agent import Frozen, goal_encoder
+from roll_jax.segmentation import mog2, pipeline, unet
+
+RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "train.json")
+# The chunk computes Skew-Fit's log p(x) of every stored frame when loop.py has `frame_log_p`.
+HAS_LOG_P = hasattr(loop, "frame_log_p")
+PARTS = ("sim", "render", "segment", "encoders") + (("log_p",) if HAS_LOG_P else ()) + (
+    "policy", "sac")
+
+
+# ----------------------------------------------------------------------------- helpers
+
+def _git_info() -> dict:
+    """Commit of the checkout and whether the files the chunk runs differ from it."""
+    import hashlib
+    import subprocess
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+    def git(*args):
+        try:
+            return subprocess.run(("git",) + args, cwd=root, capture_output=True, text=True,
+                                  check=False, timeout=30).stdout.strip()
+        except (OSError, subprocess.SubprocessError):
+            return ""
+
+    with open(os.path.join(root, "roll_jax", "loop.py"), "rb") as f:
+        loop_sha = hashlib.sha256(f.read()).hexdigest()[:12]
+    return {"commit": git("rev-parse", "--short", "HEAD"),
+            "modified_files": git("status", "--porcelain", "--untracked-files=no").splitlines(),
+            "loop_py_sha256_12": loop_sha}
+
+
+def _block(x):
+    return jax.block_until_ready(x)
+
+
+def _compile(fn, *args):
+    """AOT lower + compile of a jitted fn -> (compiled, lower_s, compile_s)."""
+    t0 = time.perf_counter()
+    lowered = fn.lower(*args)
+    t1 = time.perf_counter()
+    compiled = lowered.compile()
+    t2 = time.perf_counter()
+    return compiled, t1 - t0, t2 - t1
+
+
+def _call(fn, *args):
+    """(output, wall seconds, process CPU seconds: all threads of this process) of one call."""
+    w0, c0 = time.perf_counter(), time.process_time()
+    out = _block(fn(*args))
+    return out, time.perf_counter() - w0, time.process_time() - c0
+
+
+def _time_part(name: str, fn, args, reps: int, min_time: float = 1.0) -> dict:
+    """Compile, one warm-up call, then at least `reps` timed calls (more, up to 20, until
+    `min_time` seconds were timed): median and min wall seconds, median CPU seconds."""
+    compiled, lower_s, compile_s = _compile(fn, *args)
+    out, first, _ = _call(compiled, *args)
+    walls, cpus = [], []
+    while len(walls) < reps or (sum(walls) < min_time and len(walls) < 20):
+        out, w, c = _call(compiled, *args)
+        walls.append(w)
+        cpus.append(c)
+    res = {"lower_s": lower_s, "compile_s": compile_s, "first_call_s": first,
+           "times_s": walls, "median_s": statistics.median(walls), "min_s": min(walls),
+           "cpu_times_s": cpus, "cpu_median_s": statistics.median(cpus)}
+    print(f"  {name:9s} compile {compile_s:6.1f} s (trace+lower {lower_s:5.1f} s)  "
+          f"wall median {res['median_s']:8.3f} s  min {res['min_s']:8.3f} s  "
+          f"cpu median {res['cpu_median_s']:8.3f} s  ({len(walls)} calls)", flush=True)
+    return res, out
+
+
+# ----------------------------------------------------------------------------- setup
+
+def make_cfg(a, seeds: int):
+    base = make_config(a.task, "roll", a.preset)
+    sac_cfg = base.sac if a.replay_size is None else dataclasses.replace(
+        base.sac, replay_size=a.replay_size)
+    return make_config(a.task, "roll", a.preset, seeds=seeds, n_envs=a.n_envs,
+                       epoch_env_steps=a.epoch_env_steps,
+                       total_env_steps=a.epoch_env_steps * a.chunks, sac=sac_cfg)
+
+
+def fresh_frozen_and_pretrained(cfg, key):
+    """Random-weight stand-ins for the fitted segmentation and pre-trained encoders (same
+    shapes and sizes; speed does not depend on the weights)."""
+    enc = goal_encoder(cfg)
+    k_bg, k_unet, k_scene, k_obj, k_lstm = jax.random.split(key, 5)
+    h, w, c = cfg.scene.image_shape
+    scfg = cfg.segmentation
+    frames = jax.random.randint(k_bg, (50, h, w, c), 0, 256).astype(jnp.uint8)
+    bg = mog2.init(h, w, c, history=scfg.n_frames, var_threshold=scfg.var_threshold,
+                   detect_shadows=scfg.detect_shadows, n_mixtures=scfg.n_mixtures)
+    bg, _ = mog2.apply_video(bg, frames, learning_rate=-1.0)
+    seg = pipeline.SegParams(background=bg, unet=unet.init_unet(k_unet, scfg.unet_features, h, w),
+                             robot_threshold=jnp.float32(scfg.robot_threshold))
+    scene_vae = encoders.init_vae(k_scene, cfg.scene)
+    object_vae = encoders.init_vae(k_obj, enc.object_cfg)
+    lstm = encoders.init_lstm(k_lstm, cfg.lstm, enc.frame_dim) if enc.lstm else None
+    return Frozen(seg=seg, object_vae=object_vae.params), scene_vae, lstm
+
+
+# ----------------------------------------------------------------------------- the parts
+
+def part_functions(cfg, env, frozen):
+    """The chunk's parts as seed-vmapped jitted functions (argument layouts in the comments)."""
+    enc = goal_encoder(cfg)
+    e, t, n_ep = cfg.n_envs, cfg.horizon, cfg.episodes_per_epoch
+    n_updates = cfg.epoch_env_steps * cfg.sac.updates_per_step
+
+    def sim_one(env_state, key):  # env_state [E]; -> poses [ep, T+1, E, ...] for render
+        def episode(es, k):
+            k_reset, k_act = jax.random.split(k)
+            es = jax.vmap(env.reset_episode)(es, jax.random.split(k_reset, e))
+
+            def step(es, k):
+                a = jax.random.uniform(k, (e, env.action_size), minval=-1.0, maxval=1.0)
+                es = jax.vmap(env.step)(es, a)
+                return es, (es.data.geom_xpos, es.data.geom_xmat)
+
+            pose0 = (es.data.geom_xpos, es.data.geom_xmat)
+            es, poses = jax.lax.scan(step, es, jax.random.split(k_act, t))
+            poses = jax.tree.map(lambda p0, p: jnp.concatenate([p0[None], p], 0), pose0, poses)
+            return es, poses
+
+        return jax.lax.scan(episode, env_state, jax.random.split(key, n_ep))
+
+    def render_one(template, poses):  # template: one EnvState; poses [ep, T+1, E, ...]
+        def frame(_, pose):
+            xpos, xmat = pose
+            states = jax.vmap(lambda p, m: template.replace(
+                data=template.data.replace(geom_xpos=p, geom_xmat=m)))(xpos, xmat)
+            return None, jax.vmap(env.render)(states)
+
+        flat = jax.tree.map(lambda x: x.reshape((n_ep * (t + 1),) + x.shape[2:]), poses)
+        _, rgb = jax.lax.scan(frame, None, flat)  # [ep*(T+1), E, H, W, 3]
+        return rgb.reshape((n_ep, t + 1) + rgb.shape[1:]).swapaxes(1, 2)  # [ep, E, T+1, ...]
+
+    def segment_one(fz, rgb):  # rgb [ep, E, T+1, H, W, 3]
+        return enc.goal_images(fz, rgb)
+
+    def encoders_one(fz, scene_params, lstm_params, rgb, goal_imgs, key):
+        def episode(_, xs):
+            rgb_ep, g_ep, k = xs  # [E, T+1, ...]
+
+            def step(_, frame):  # the policy's observation, one step of all envs
+                return None, loop.scene_latents(cfg, scene_params, frame)
+
+            _, z_steps = jax.lax.scan(step, None, rgb_ep[:, :t].swapaxes(0, 1))
+            goals = enc.prior_goals(k, lstm_params, e)
+            obs = loop.scene_latents(cfg, scene_params, rgb_ep)
+            achieved = jax.vmap(lambda f: enc.sequence(lstm_params, f))(
+                enc.frame_latents(fz, scene_params, g_ep))
+            return None, (z_steps.sum(), goals.sum(), obs.sum(), achieved.sum())
+
+        return jax.lax.scan(episode, None, (rgb, goal_imgs, jax.random.split(key, n_ep)))[1]
+
+    def log_p_one(scene_params, rgb, key):  # rgb [ep, E, T+1, ...]
+        def episode(_, xs):
+            return None, loop.frame_log_p(cfg, scene_params, *xs)
+
+        return jax.lax.scan(episode, None, (rgb, jax.random.split(key, n_ep)))[1]
+
+    def policy_one(policy_params, z_steps, goals, key):  # z_steps [ep, T, E, d]; goals [ep, E, g]
+        def episode(_, xs):
+            z_ep, g, k = xs
+
+            def step(_, zk):
+                z, kk = zk
+                return None, sac.select_action(policy_params, z, g, kk)
+
+            return None, jax.lax.scan(step, None, (z_ep, jax.random.split(k, t)))[1]
+
+        return jax.lax.scan(episode, None, (z_steps, goals, jax.random.split(key, n_ep)))[1]
+
+    def sac_one(state, key):
+        s, m = loop.sac_updates(cfg, enc, state, key, n_updates)
+        return s.sac, m
+
+    def collect_one(fz, state, key, act_random):
+        def episode(s, k):
+            out = loop.collect_episode(cfg, env, enc, fz, s, k, act_random)
+            es, traj, m = out[0], out[1:-1], out[-1]  # (es, traj[, log_p], metrics)
+            # Reductions of every trajectory field keep all of it alive (no dead code).
+            sums = jax.tree.map(lambda x: jnp.sum(x.astype(jnp.float32)), traj)
+            return s.replace(env_state=es), (m, sums)
+
+        s, out = jax.lax.scan(episode, state, jax.random.split(key, n_ep))
+        return s.env_state, out
+
+    v = jax.vmap
+    return {
+        "sim": jax.jit(v(sim_one)),
+        "render": jax.jit(v(render_one, in_axes=(None, 0))),
+        "segment": jax.jit(v(segment_one, in_axes=(None, 0))),
+        "encoders": jax.jit(v(encoders_one, in_axes=(None, 0, 0, 0, 0, 0))),
+        "log_p": jax.jit(v(log_p_one)),
+        "policy": jax.jit(v(policy_one)),
+        "sac": jax.jit(v(sac_one)),
+        "collect": jax.jit(v(collect_one, in_axes=(None, 0, 0, None))),
+    }
+
+
+# ----------------------------------------------------------------------------- one seed count
+
+def bench_seeds(a, seeds: int, env) -> dict:
+    cfg = make_cfg(a, seeds)
+    enc = goal_encoder(cfg)
+    key = jax.random.PRNGKey(a.seed)
+    k_fz, k_init, k_parts = jax.random.split(key, 3)
+    frozen, scene_vae, lstm = fresh_frozen_and_pretrained(cfg, k_fz)
+    state = jax.jit(jax.vmap(lambda k: loop.init_state(k, cfg, env, scene_vae, lstm)))(
+        jax.random.split(k_init, seeds))
+    _block(state)
+    plan = loop.ChunkPlan(learn=jnp.bool_(True), act_random=jnp.bool_(False),
+                          vae_batches=jnp.int32(a.vae_batches),
+                          lstm_batches=jnp.int32(a.lstm_batches))
+    steps_per_chunk = seeds * cfg.epoch_env_steps
+    n_updates = cfg.epoch_env_steps * cfg.sac.updates_per_step
+    print(f"\n== {cfg.task}, {seeds} seed(s): {cfg.n_envs} envs x {cfg.episodes_per_epoch} "
+          f"episode(s) x {cfg.horizon} steps = {cfg.epoch_env_steps} env steps per seed per chunk, "
+          f"{n_updates} SAC updates per seed at batch {cfg.sac.batch_size}", flush=True)
+
+    # 1. the chunk, exactly as train.run builds it
+    chunk = loop.compile_chunk(cfg, env)
+    compiled, lower_s, compile_s = _compile(chunk, state, frozen, plan)
+    print(f"  chunk     compile {compile_s:6.1f} s (trace+lower {lower_s:5.1f} s)", flush=True)
+    times, cpus = [], []
+    for i in range(a.chunks):
+        (state, metrics), w, c = _call(compiled, state, frozen, plan)
+        times.append(w)
+        cpus.append(c)
+        print(f"  chunk {i + 1}/{a.chunks}: wall {w:8.2f} s  cpu {c:8.2f} s"
+              f"{'  (warm-up, not in steady state)' if i == 0 else ''}", flush=True)
+    finite = bool(all(jnp.all(jnp.isfinite(x)) for x in jax.tree.leaves(metrics)))
+    steady = times[1:]
+    chunk_res = {"lower_s": lower_s, "compile_s": compile_s, "first_chunk_s": times[0],
+                 "steady_chunk_times_s": steady, "steady_chunk_median_s": statistics.median(steady),
+                 "steady_chunk_min_s": min(steady), "steady_chunk_cpu_times_s": cpus[1:],
+                 "steady_chunk_cpu_median_s": statistics.median(cpus[1:]),
+                 "metrics_finite": finite,
+                 "env_steps_per_s": steps_per_chunk / statistics.median(steady),
+                 "env_steps_per_s_per_seed": cfg.epoch_env_steps / statistics.median(steady)}
+    print(f"  chunk steady state: median {chunk_res['steady_chunk_median_s']:.2f} s -> "
+          f"{chunk_res['env_steps_per_s']:.1f} env steps/s ({seeds} seeds), "
+          f"{chunk_res['env_steps_per_s_per_seed']:.1f} per seed", flush=True)
+
+    # 2. the parts, at one chunk's sizes, on the state the chunks left
+    fns = part_functions(cfg, env, frozen)
+    keys = jax.random.split(k_parts, 4 * seeds).reshape(4, seeds, -1)
+    parts = {}
+    parts["sim"], (_, poses) = _time_part("sim", fns["sim"], (state.env_state, keys[0]), a.reps)
+    template = jax.tree.map(lambda x: x[0, 0], state.env_state)
+    parts["render"], rgb = _time_part("render", fns["render"], (template, poses), a.reps)
+    parts["segment"], goal_imgs = _time_part("segment", fns["segment"], (frozen, rgb), a.reps)
+    lstm_params = state.lstm.params if state.lstm is not None else None
+    parts["encoders"], _ = _time_part(
+        "encoders", fns["encoders"],
+        (frozen, state.scene_vae.params, lstm_params, rgb, goal_imgs, keys[1]), a.reps)
+    if HAS_LOG_P:
+        parts["log_p"], _ = _time_part("log_p", fns["log_p"],
+                                       (state.scene_vae.params, rgb, keys[2]), a.reps)
+    ep, t = cfg.episodes_per_epoch, cfg.horizon
+    z_steps = jax.random.normal(keys[2, 0], (seeds, ep, t, cfg.n_envs, cfg.scene.latent_dim))
+    goals = jax.random.normal(keys[2, 1], (seeds, ep, cfg.n_envs, enc.goal_dim))
+    parts["policy"], _ = _time_part("policy", fns["policy"],
+                                    (state.sac.policy_params, z_steps, goals, keys[3]), a.reps)
+    parts["sac"], _ = _time_part("sac", fns["sac"], (state, keys[0]), a.reps)
+    collect = None
+    if a.collect:
+        collect, _ = _time_part("collect", fns["collect"],
+                                (frozen, state, keys[1], jnp.bool_(False)), a.reps)
+    total = sum(parts[p]["median_s"] for p in PARTS)
+    cpu_total = sum(parts[p]["cpu_median_s"] for p in PARTS)
+    for p in PARTS:
+        parts[p]["share_of_sum"] = parts[p]["median_s"] / total
+        parts[p]["cpu_share_of_sum"] = parts[p]["cpu_median_s"] / cpu_total
+    res = {
+        "seeds": seeds,
+        "sizes": {"n_envs": cfg.n_envs, "horizon": cfg.horizon,
+                  "episodes_per_chunk": cfg.episodes_per_epoch,
+                  "env_steps_per_chunk_per_seed": cfg.epoch_env_steps,
+                  "env_steps_per_chunk": steps_per_chunk,
+                  "rendered_frames_per_chunk": seeds * cfg.n_envs * ep * (t + 1),
+                  "sac_updates_per_chunk_per_seed": n_updates,
+                  "sac_batch_size": cfg.sac.batch_size, "sac_hidden": list(cfg.sac.hidden),
+                  "replay_capacity_trajectories": cfg.sac.replay_capacity(cfg.horizon),
+                  "scene_latent": cfg.scene.latent_dim, "object_latent": cfg.object_vae.latent_dim,
+                  "lstm_hidden": cfg.lstm.hidden, "lstm_layers": cfg.lstm.layers,
+                  "unet_features": cfg.segmentation.unet_features},
+        "plan": {"learn": True, "act_random": False, "vae_batches": a.vae_batches,
+                 "lstm_batches": a.lstm_batches},
+        "chunk": chunk_res,
+        "parts": parts,
+        "parts_sum_s": total,
+        "parts_cpu_sum_s": cpu_total,
+        "chunk_over_parts_sum": chunk_res["steady_chunk_median_s"] / total,
+        "chunk_over_parts_sum_cpu": chunk_res["steady_chunk_cpu_median_s"] / cpu_total,
+        "collect_phase": collect,
+    }
+    print(f"  sum of parts {total:.2f} s (cpu {cpu_total:.2f} s); chunk "
+          f"{chunk_res['steady_chunk_median_s']:.2f} s (cpu "
+          f"{chunk_res['steady_chunk_cpu_median_s']:.2f} s); ratio chunk / parts: wall "
+          f"{res['chunk_over_parts_sum']:.2f}, cpu {res['chunk_over_parts_sum_cpu']:.2f}"
+          + (f"; collect phase {collect['median_s']:.2f} s" if collect else ""), flush=True)
+    return res
+
+
+def table(results: list[dict]) -> str:
+    """Per seed count: wall s (median), its share of the parts' sum, CPU s (median, all
+    threads), its share, compile s."""
+    width = 46
+    lines = ["part        " + "".join(f"{str(r['seeds']) + ' seed(s)':>{width}s}" for r in results),
+             "            " + "".join(f"{'wall s':>10s}{'share':>8s}{'cpu s':>10s}{'share':>8s}"
+                                     f"{'compile s':>10s}" for _ in results)]
+    for p in PARTS:
+        row = f"{p:12s}"
+        for r in results:
+            q = r["parts"][p]
+            row += (f"{q['median_s']:10.3f}{100 * q['share_of_sum']:7.1f}%"
+                    f"{q['cpu_median_s']:10.3f}{100 * q['cpu_share_of_sum']:7.1f}%"
+                    f"{q['compile_s']:10.1f}")
+        lines.append(row)
+
+    def plain(name, get):
+        row = f"{name:12s}"
+        for r in results:
+            wall, cpu, comp = get(r)
+            row += (f"{wall:10.3f}{'':8s}{cpu:10.3f}{'':8s}"
+                    + (f"{comp:10.1f}" if comp is not None else f"{'':10s}"))
+        lines.append(row)
+
+    plain("sum of parts", lambda r: (r["parts_sum_s"], r["parts_cpu_sum_s"], None))
+    if all(r["collect_phase"] is not None for r in results):
+        plain("collect", lambda r: (r["collect_phase"]["median_s"],
+                                    r["collect_phase"]["cpu_median_s"],
+                                    r["collect_phase"]["compile_s"]))
+    plain("whole chunk", lambda r: (r["chunk"]["steady_chunk_median_s"],
+                                    r["chunk"]["steady_chunk_cpu_median_s"],
+                                    r["chunk"]["compile_s"]))
+    row = f"{'env steps/s':12s}"
+    for r in results:
+        row += f"{r['chunk']['env_steps_per_s']:10.1f}{'':{width - 10}s}"
+    lines.append(row)
+    return "\n".join(lines)
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--task", default="puck_push", choices=envs_mjx.TASK_NAMES)
+    p.add_argument("--seeds", type=int, nargs="+", default=[1, 6])
+    p.add_argument("--preset", default="paper", choices=("paper", "smoke"))
+    p.add_argument("--epoch-env-steps", type=int, default=None,
+                   help="env steps per seed per chunk, a multiple of n_envs x horizon "
+                   "(default: the preset's, 500 for paper)")
+    p.add_argument("--n-envs", type=int, default=None,
+                   help="envs per seed (default: the preset's, 10 for the push tasks)")
+    p.add_argument("--chunks", type=int, default=3, help="chunks per seed count; the first is a "
+                   "warm-up, the rest are timed")
+    p.add_argument("--reps", type=int, default=2, help="timed calls per part after the warm-up")
+    p.add_argument("--replay-size", type=int, default=None,
+                   help="replay capacity in transitions (default: the preset's)")
+    p.add_argument("--vae-batches", type=int, default=0,
+                   help="scheduled scene-VAE batches per chunk (0: steady state without)")
+    p.add_argument("--lstm-batches", type=int, default=0,
+                   help="online LSTM batches per chunk (0: steady state without)")
+    p.add_argument("--no-collect", dest="collect", action="store_false",
+                   help="skip timing the collection phase as one function (saves its compile)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", default=RESULTS)
+    a = p.parse_args(argv)
+    env = envs_mjx.make(a.task)
+    preset = make_config(a.task, "roll", a.preset)
+    a.n_envs = preset.n_envs if a.n_envs is None else a.n_envs
+    a.epoch_env_steps = preset.epoch_env_steps if a.epoch_env_steps is None else a.epoch_env_steps
+    if a.chunks < 2:
+        p.error("--chunks must be >= 2 (the first chunk is a warm-up)")
+    try:
+        make_cfg(a, 1)
+    except ValueError as e:
+        p.error(str(e))
+    t0 = time.perf_counter()
+    res = {
+        "jax_backend": jax.default_backend(), "jax_device": str(jax.devices()[0]),
+        "device_kind": jax.devices()[0].device_kind, "jax_version": jax.__version__,
+        "cpu": platform.processor() or platform.machine(), "cpu_count": os.cpu_count(),
+        "load_average_at_start": list(os.getloadavg()),
+        "task": a.task, "preset": a.preset, "git": _git_info(),
+        "args": vars(a),
+        "note": ("whole chunk = loop.compile_chunk (the training code path), compile timed "
+                 "apart (AOT lower + compile), steady state = median of chunks 2.."
+                 "--chunks; parts = each its own jitted function at one chunk's sizes, median of at "
+                 "least --reps calls after a warm-up (fast parts repeat up to 1 s or 20 calls), "
+                 "shares of the parts' sum; wall and process CPU seconds. Segmentation and "
+                 "encoder weights are freshly initialised (random): throughput does not depend on "
+                 "training them. Plan: the policy acts, SAC learns, scheduled VAE/LSTM training "
+                 "as in args (0 = off). The machine may be shared with other jobs (see load "
+                 "averages)."),
+        "runs": [],
+    }
+    print(res["note"], flush=True)
+    for s in a.seeds:
+        res["runs"].append(bench_seeds(a, s, env))
+    res["load_average_at_end"] = list(os.getloadavg())
+    res["wall_s"] = time.perf_counter() - t0
+    print()
+    print(table(res["runs"]))
+    print(f"\nwall {res['wall_s']:.0f} s; load average {res['load_average_at_end']}")
+    os.makedirs(os.path.dirname(os.path.abspath(a.out)), exist_ok=True)
+    with open(a.out, "w") as f:
+        json.dump(res, f, indent=2)
+    print(f"wrote {a.out}")
+
+
+if __name__ == "__main__":
+    main()
