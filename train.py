@@ -4,6 +4,7 @@
     python train.py ... --resume                 # continue the run in --out exactly
     python train.py ... --no-matching-loss | --no-lstm | --no-object-vae   (ROLL ablations)
     python train.py ... --set total_env_steps=20000 sac.batch_size=256    (config overrides)
+    python train.py ... --seeds 8 --devices all  # seed axis sharded over the devices (or --devices N)
     python train.py --algo random ...            # random-policy rollout frames only (viewer)
 
 Writes DIR/config.json, DIR/metrics.csv, DIR/ckpt/ (orbax), DIR/plots/learning_curve.png,
@@ -14,7 +15,6 @@ or given with --seg-ckpt / --enc-ckpt).
 from __future__ import annotations
 
 import argparse
-import ast
 import dataclasses
 import json
 import os
@@ -41,45 +41,14 @@ class RolloutConfig:
     out: str
 
 
-def _parse_overrides(items, p) -> dict:
-    """KEY=VALUE (top-level TrainConfig fields) or GROUP.KEY=VALUE (sac., lstm., scene_vae.,
-    object_vae., segmentation.) -> nested dict of Python literals."""
-    out: dict = {}
-    for item in items:
-        if "=" not in item:
-            p.error(f"--set {item!r}: expected KEY=VALUE")
-        key, raw = item.split("=", 1)
-        try:
-            value = ast.literal_eval(raw)
-        except (ValueError, SyntaxError):
-            value = raw
-        group, _, field = key.rpartition(".")
-        out.setdefault(group, {})[field] = value
-    return out
-
-
 def build_config(a, p):
     """TrainConfig from parsed args; every error is reported before anything compiles."""
-    from configs.train import TrainConfig, make_config
+    from roll_jax.train import build_config as build
 
-    over = _parse_overrides(a.set, p)
-    top = dict(over.pop("", {}))
-    top.update(seeds=a.seeds, matching_loss=not a.no_matching_loss, use_lstm=not a.no_lstm,
-               use_object_vae=not a.no_object_vae)
     try:
-        base = make_config(a.task, a.algo, a.preset)
-        for group, fields in over.items():
-            sub = getattr(base, group, None)
-            if not dataclasses.is_dataclass(sub):
-                p.error(f"--set {group}.*: unknown config group {group!r}")
-            unknown = set(fields) - {f.name for f in dataclasses.fields(sub)}
-            if unknown:
-                p.error(f"--set: unknown field(s) {sorted(unknown)} in {group}")
-            top[group] = dataclasses.replace(sub, **fields)
-        unknown = set(top) - {f.name for f in dataclasses.fields(TrainConfig)}
-        if unknown:
-            p.error(f"--set: unknown config field(s) {sorted(unknown)}")
-        return make_config(a.task, a.algo, a.preset, **top)
+        return build(a.task, a.algo, a.preset, seeds=a.seeds, overrides=a.set,
+                     matching_loss=not a.no_matching_loss, use_lstm=not a.no_lstm,
+                     use_object_vae=not a.no_object_vae)
     except (ValueError, TypeError) as e:
         p.error(str(e))
 
@@ -102,6 +71,9 @@ def parse_args(argv=None):
     p.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE")
     p.add_argument("--seed", type=int, default=0, help="base PRNG seed of the run")
     p.add_argument("--n-envs", type=int, default=None, help="--algo random: envs per seed")
+    p.add_argument("--devices", default="all",
+                   help="'all' or N: shard the seed axis over that many devices (seeds must be "
+                        "divisible by it; 1 = unsharded)")
     a = p.parse_args(argv)
     if a.task not in envs_mjx.TASK_NAMES:
         p.error(f"unknown --task {a.task!r}; expected one of {', '.join(envs_mjx.TASK_NAMES)}")
@@ -121,6 +93,12 @@ def parse_args(argv=None):
         return a, RolloutConfig(task=a.task, algo=a.algo, preset=a.preset, seeds=a.seeds,
                                 out=out, **preset), out
     cfg = build_config(a, p)
+    from roll_jax import sharding
+
+    try:
+        sharding.resolve(a.devices, cfg.seeds)
+    except ValueError as e:
+        p.error(str(e))
     if a.resume:
         from roll_jax.train import check_resume
 
@@ -207,7 +185,7 @@ def main(argv=None) -> int:
 
     t0 = time.time()
     rows = train.run(cfg, out, resume=a.resume, seg_ckpt=a.seg_ckpt, enc_ckpt=a.enc_ckpt,
-                     seed=a.seed)
+                     seed=a.seed, devices=a.devices)
     last = [r for r in rows if r["env_steps"] == rows[-1]["env_steps"]]
     print(json.dumps({"out": out, "env_steps": rows[-1]["env_steps"], "seeds": cfg.seeds,
                       "final_distance_per_seed": [r["final_distance"] for r in last],

@@ -2,11 +2,14 @@
 
 `run(cfg, out, ...)` is what `train.py` calls. Between chunks, Python evaluates, logs
 metrics.csv, checkpoints (orbax, the whole train state including the replay buffer), plots the
-learning curve and drives the progress bar. Seeds are the leading vmapped axis of the state.
+learning curve and drives the progress bar. Seeds are the leading vmapped axis of the state;
+with several devices that axis is sharded over them (`roll_jax.sharding`). A finished run
+gets `COMPLETE_MARKER` (complete.json), written atomically last.
 """
 
 from __future__ import annotations
 
+import ast
 import csv
 import dataclasses
 import json
@@ -19,11 +22,27 @@ import numpy as np
 
 from configs.train import TrainConfig
 from roll_jax import loop, pretrain
+from roll_jax import sharding as shd
 from roll_jax.agent import Frozen, goal_encoder
 
 METRIC_KEYS = ("q_loss", "policy_loss", "alpha", "alpha_loss", "entropy", "q_mean", "reward",
                "vae_loss", "lstm_loss", "rollout_latent_dist")
 LOSS_KEYS = ("q_loss", "policy_loss", "alpha_loss", "vae_loss", "lstm_loss")
+COMPLETE_MARKER = "complete.json"
+
+
+def is_complete(out: str) -> bool:
+    """The run in `out` reached its last epoch (run() writes the marker last)."""
+    return os.path.exists(os.path.join(out, COMPLETE_MARKER))
+
+
+def _write_atomic(path: str, text: str) -> None:
+    tmp = f"{path}.tmp{os.getpid()}"
+    with open(tmp, "w") as f:
+        f.write(text)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
 
 
 class TrainingDiverged(RuntimeError):
@@ -32,6 +51,50 @@ class TrainingDiverged(RuntimeError):
 
 def _config_json(cfg: TrainConfig) -> dict:
     return json.loads(json.dumps(dataclasses.asdict(cfg)))
+
+
+def parse_overrides(items) -> dict:
+    """KEY=VALUE (top-level TrainConfig fields) or GROUP.KEY=VALUE (sac., lstm., scene_vae.,
+    object_vae., segmentation.) -> {group: {field: Python literal}} ('' = top level)."""
+    out: dict = {}
+    for item in items:
+        if "=" not in item:
+            raise ValueError(f"--set {item!r}: expected KEY=VALUE")
+        key, raw = item.split("=", 1)
+        try:
+            value = ast.literal_eval(raw)
+        except (ValueError, SyntaxError):
+            value = raw
+        group, _, field = key.rpartition(".")
+        out.setdefault(group, {})[field] = value
+    return out
+
+
+def build_config(task: str, algo: str, preset: str, seeds: int = 1, overrides=(),
+                 matching_loss: bool = True, use_lstm: bool = True,
+                 use_object_vae: bool = True) -> TrainConfig:
+    """The config train.py and the reproduction grid run: `make_config` with `--set` style
+    overrides (strings) and the ablation flags; ValueError on anything unknown or
+    contradictory (nothing is compiled)."""
+    from configs.train import make_config
+
+    over = parse_overrides(overrides)
+    top = dict(over.pop("", {}))
+    top.update(seeds=seeds, matching_loss=matching_loss, use_lstm=use_lstm,
+               use_object_vae=use_object_vae)
+    base = make_config(task, algo, preset)
+    for group, fields in over.items():
+        sub = getattr(base, group, None)
+        if not dataclasses.is_dataclass(sub):
+            raise ValueError(f"--set {group}.*: unknown config group {group!r}")
+        unknown = set(fields) - {f.name for f in dataclasses.fields(sub)}
+        if unknown:
+            raise ValueError(f"--set: unknown field(s) {sorted(unknown)} in {group}")
+        top[group] = dataclasses.replace(sub, **fields)
+    unknown = set(top) - {f.name for f in dataclasses.fields(TrainConfig)}
+    if unknown:
+        raise ValueError(f"--set: unknown config field(s) {sorted(unknown)}")
+    return make_config(task, algo, preset, **top)
 
 
 def check_resume(out: str, cfg: TrainConfig) -> None:
@@ -67,10 +130,15 @@ def setup(cfg: TrainConfig, env, key, out: str, seg_ckpt=None, enc_ckpt=None, pr
     return frozen, pre
 
 
-def init_seeds(cfg: TrainConfig, env, key, pre: pretrain.Pretrained) -> loop.TrainState:
-    """[seeds]-batched train state; every seed starts from the same pre-trained encoders."""
+def init_seeds(cfg: TrainConfig, env, key, pre: pretrain.Pretrained,
+               sharding: shd.SeedSharding | None = None) -> loop.TrainState:
+    """[seeds]-batched train state; every seed starts from the same pre-trained encoders. With
+    a `sharding` each device builds its own seeds' state (nothing gathered on one device)."""
     keys = jax.random.split(key, cfg.seeds)
-    return jax.jit(jax.vmap(lambda k: loop.init_state(k, cfg, env, pre.scene_vae, pre.lstm)))(keys)
+    init = jax.vmap(lambda k: loop.init_state(k, cfg, env, pre.scene_vae, pre.lstm))
+    if sharding is None:
+        return jax.jit(init)(keys)
+    return jax.jit(init, out_shardings=sharding.seeds)(sharding.shard(keys))
 
 
 def _manager(out: str, cfg: TrainConfig):
@@ -119,23 +187,42 @@ def write_gif(path: str, video, goal) -> None:
     frames[0].save(path, save_all=True, append_images=frames[1:], duration=80, loop=0)
 
 
-def learning_curve(rows: list[dict], path: str, title: str) -> None:
-    """Median over seeds with the 25-75% band (the paper's Fig. 4 style)."""
+def seed_quantiles(rows: list[dict], key: str = "final_distance"):
+    """Per env step over seeds: (steps, median, 25th, 75th percentile) as numpy arrays."""
+    steps = sorted({r["env_steps"] for r in rows})
+    vals = [[r[key] for r in rows if r["env_steps"] == s] for s in steps]
+    return (np.asarray(steps), np.asarray([np.median(v) for v in vals]),
+            np.asarray([np.percentile(v, 25) for v in vals]),
+            np.asarray([np.percentile(v, 75) for v in vals]))
+
+
+def plot_median_band(ax, rows: list[dict], label: str, key: str = "final_distance", **kw) -> None:
+    """Median over seeds with the 25-75% band (the paper's Fig. 4 style) on `ax`."""
+    steps, med, lo, hi = seed_quantiles(rows, key)
+    if len(steps) <= 20:  # few evaluations: mark them; a single one shows its band as a bar
+        kw = {"marker": "o", "markersize": 3, **kw}
+    (line,) = ax.plot(steps, med, label=label, **kw)
+    ax.fill_between(steps, lo, hi, alpha=0.25, color=line.get_color())
+    if len(steps) == 1:
+        ax.errorbar(steps, med, yerr=[med - lo, hi - med], color=line.get_color(), capsize=3)
+    ax.set_xlabel("env steps")
+    ax.set_ylabel(key.replace("_", " "))
+
+
+def pyplot():
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    steps = sorted({r["env_steps"] for r in rows})
-    vals = [[r["final_distance"] for r in rows if r["env_steps"] == s] for s in steps]
-    med = [np.median(v) for v in vals]
-    lo = [np.percentile(v, 25) for v in vals]
-    hi = [np.percentile(v, 75) for v in vals]
+    return plt
+
+
+def learning_curve(rows: list[dict], path: str, title: str) -> None:
+    """The run's plot: median over seeds with the 25-75% band (the paper's Fig. 4 style)."""
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(4.5, 3.2))
-    ax.plot(steps, med, label="median over seeds")
-    ax.fill_between(steps, lo, hi, alpha=0.3, label="25-75%")
-    ax.set_xlabel("env steps")
-    ax.set_ylabel("final distance")
+    plot_median_band(ax, rows, "median over seeds (band 25-75%)")
     ax.set_title(title)
     ax.legend(fontsize=7)
     fig.tight_layout()
@@ -145,45 +232,62 @@ def learning_curve(rows: list[dict], path: str, title: str) -> None:
 
 def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None = None,
         enc_ckpt: str | None = None, seed: int = 0, progress: bool = True,
-        stop_after_epochs: int | None = None) -> list[dict]:
+        stop_after_epochs: int | None = None, devices="all") -> list[dict]:
     """Train `cfg.seeds` seeds; returns the metrics rows. `stop_after_epochs` ends early (as an
-    interruption would; tests use it for resume)."""
+    interruption would; tests use it for resume). `devices` ('all' or N) shards the seed axis
+    over that many devices (seeds must divide evenly); one device is the unsharded path."""
     from tqdm import tqdm
 
     import envs_mjx
 
     if resume:
         check_resume(out, cfg)
-    os.makedirs(os.path.join(out, "plots"), exist_ok=True)
-    os.makedirs(os.path.join(out, "videos"), exist_ok=True)
-    with open(os.path.join(out, "config.json"), "w") as f:
-        json.dump(_config_json(cfg), f, indent=2)
+    sharding = shd.make(devices, cfg.seeds)  # the divisibility error comes before any compile
+    main = shd.is_main_process()
+    if main:
+        os.makedirs(os.path.join(out, "plots"), exist_ok=True)
+        os.makedirs(os.path.join(out, "videos"), exist_ok=True)
+        marker = os.path.join(out, COMPLETE_MARKER)
+        if os.path.exists(marker):  # being redone or continued: not complete until the end
+            os.remove(marker)
+        with open(os.path.join(out, "config.json"), "w") as f:
+            json.dump(_config_json(cfg), f, indent=2)
 
     env = envs_mjx.make(cfg.task)
     key = jax.random.PRNGKey(seed)
     k_setup, k_init, k_eval = jax.random.split(key, 3)
     frozen, pre = setup(cfg, env, k_setup, out, seg_ckpt, enc_ckpt, progress)
-    state = init_seeds(cfg, env, k_init, pre)
+    state = init_seeds(cfg, env, k_init, pre, sharding)
+    if sharding is not None:
+        frozen = sharding.replicate(frozen)
     mgr = _manager(out, cfg)
     rows: list[dict] = []
     csv_path = os.path.join(out, "metrics.csv")
     start_epoch = 0
     if resume and mgr.latest_step() is not None:
-        start_epoch, state = _restore(mgr, jax.eval_shape(lambda: state))
+        # The live state's placement (one device, or the seed sharding): a checkpoint
+        # written on another device count restores onto this one.
+        abstract = jax.tree.map(
+            lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=x.sharding), state)
+        start_epoch, state = _restore(mgr, abstract)
+        if sharding is not None:
+            state = sharding.shard(state)
         with open(csv_path) as f:
             rows = [{k: (float(v) if k not in ("seed",) else int(v)) for k, v in r.items()}
                     for r in csv.DictReader(f) if float(r["env_steps"]) <= start_epoch * cfg.epoch_env_steps]
     chunk = loop.compile_chunk(cfg, env)
     evaluate = jax.jit(jax.vmap(loop.make_evaluate(cfg, env), in_axes=(0, None, 0)))
+    if sharding is not None:
+        chunk = sharding.wrap_chunk(chunk)
 
     end_epoch = cfg.n_epochs if stop_after_epochs is None else min(cfg.n_epochs, stop_after_epochs)
     bar = tqdm(range(start_epoch, end_epoch), desc=f"{cfg.task} {cfg.algo}", unit="epoch",
-               disable=not progress, initial=start_epoch, total=cfg.n_epochs)
+               disable=not (progress and main), initial=start_epoch, total=cfg.n_epochs)
     t_last, steps_last = time.perf_counter(), start_epoch * cfg.epoch_env_steps
     for epoch in bar:
         plan = loop.plan_chunk(cfg, epoch)
         state, metrics = chunk(state, frozen, plan)
-        metrics = jax.device_get(metrics)
+        metrics = shd.to_host(metrics)
         env_steps = (epoch + 1) * cfg.epoch_env_steps
         for k in LOSS_KEYS:
             if k in metrics and not np.all(np.isfinite(metrics[k])):
@@ -192,22 +296,25 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
                     f"{k} is {metrics[k][bad]} for seed {bad} at env step {env_steps} (epoch "
                     f"{epoch}); the last good checkpoint in {os.path.join(out, 'ckpt')} is kept")
         if (epoch + 1) % cfg.eval_every_epochs == 0 or epoch + 1 == cfg.n_epochs:
-            ev = jax.device_get(evaluate(state, frozen, jax.random.split(
-                jax.random.fold_in(k_eval, epoch), cfg.seeds)))
+            eval_keys = jax.random.split(jax.random.fold_in(k_eval, epoch), cfg.seeds)
+            if sharding is not None:
+                eval_keys = sharding.shard(eval_keys)
+            ev = shd.to_host(evaluate(state, frozen, eval_keys))
             for s in range(cfg.seeds):
                 row = {"env_steps": env_steps, "seed": s,
                            "final_distance": float(ev["final_distance"][s]),
                            "final_distance_median": float(ev["final_distance_median"][s])}
                 row.update({k: float(metrics[k][s]) for k in METRIC_KEYS if k in metrics})
                 rows.append(row)
-            write_gif(os.path.join(out, "videos", f"eval_{env_steps:08d}.gif"),
-                      ev["video"][0], ev["goal_image"][0])
-            with open(csv_path, "w", newline="") as f:
-                w = csv.DictWriter(f, fieldnames=list(rows[0]))
-                w.writeheader()
-                w.writerows(rows)
-            learning_curve(rows, os.path.join(out, "plots", "learning_curve.png"),
-                           f"{cfg.task} ({cfg.algo}, {cfg.seeds} seeds)")
+            if main:
+                write_gif(os.path.join(out, "videos", f"eval_{env_steps:08d}.gif"),
+                          ev["video"][0], ev["goal_image"][0])
+                with open(csv_path, "w", newline="") as f:
+                    w = csv.DictWriter(f, fieldnames=list(rows[0]))
+                    w.writeheader()
+                    w.writerows(rows)
+                learning_curve(rows, os.path.join(out, "plots", "learning_curve.png"),
+                               f"{cfg.task} ({cfg.algo}, {cfg.seeds} seeds)")
             _save(mgr, epoch + 1, state)
             now = time.perf_counter()
             rate = (env_steps - steps_last) * cfg.seeds / max(now - t_last, 1e-9)
@@ -216,7 +323,9 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
                             sps=f"{rate:.0f}")
     mgr.wait_until_finished()
     mgr.close()
+    if main and end_epoch == cfg.n_epochs:
+        _write_atomic(os.path.join(out, COMPLETE_MARKER), json.dumps(
+            {"env_steps": cfg.total_env_steps, "seeds": cfg.seeds, "task": cfg.task,
+             "algo": cfg.algo, "devices": 1 if sharding is None else sharding.n_devices},
+            indent=2))
     return rows
-
-
-

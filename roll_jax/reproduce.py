@@ -1,0 +1,280 @@
+"""The paper's experiment grid: tasks x algorithms (x seeds vmapped in one run), ablations,
+Figure 4, the ablation figure and a results table.
+
+    python -m roll_jax.reproduce --preset paper --out runs/paper
+    python -m roll_jax.reproduce --preset smoke --out runs/smoke --tasks puck_push --seeds 2
+    python -m roll_jax.reproduce ... --ablations            # + ROLL ablations on hurdle_top
+    python -m roll_jax.reproduce ... --report-only          # redraw from the runs on disk
+
+Each cell is one `roll_jax.train.run` in DIR/runs/TASK__VARIANT (all seeds vmapped, sharded
+over --devices). A run with the completion marker is skipped (never rerun, never
+overwritten); an incomplete one is resumed from its last checkpoint. Every cell's config is
+built, and checked against what DIR already holds, before anything runs. The segmentation is
+fitted once per task (DIR/segmentation/TASK, shared by the task's ROLL runs: same seed, same
+config, so the same fit). Then DIR/figure4.png, DIR/ablations.png (with --ablations),
+DIR/results.md and DIR/results.csv are drawn from the runs' metrics.csv files.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import dataclasses
+import json
+import os
+import sys
+import time
+
+from configs.train import ALGOS, PRESETS, TASKS
+from roll_jax import train
+
+ABLATION_TASK = "hurdle_top"
+# variant -> (algo, ablation flags for build_config)
+VARIANTS = {
+    "roll": ("roll", {}),
+    "skewfit": ("skewfit", {}),
+    "roll_no_matching_loss": ("roll", {"matching_loss": False}),
+    "roll_no_lstm": ("roll", {"use_lstm": False}),
+    "roll_no_object_vae": ("roll", {"use_object_vae": False}),
+}
+ABLATIONS = ("roll", "roll_no_matching_loss", "roll_no_lstm", "roll_no_object_vae")
+LABELS = {"roll": "ROLL", "skewfit": "Skew-Fit", "roll_no_matching_loss": "ROLL, no matching loss",
+          "roll_no_lstm": "ROLL, no LSTM", "roll_no_object_vae": "ROLL, no object-VAE"}
+# Fields the grid sets itself; a --set of them would contradict it.
+GRID_FIELDS = ("task", "algo", "preset", "seeds", "matching_loss", "use_lstm", "use_object_vae")
+METRIC = "final_distance"
+
+
+@dataclasses.dataclass(frozen=True)
+class Cell:
+    task: str
+    variant: str
+    cfg: object  # TrainConfig
+    out: str
+
+
+def run_dir(out: str, task: str, variant: str) -> str:
+    return os.path.join(out, "runs", f"{task}__{variant}")
+
+
+def parse_args(argv=None):
+    p = argparse.ArgumentParser(prog="python -m roll_jax.reproduce", description=__doc__,
+                                formatter_class=argparse.RawTextHelpFormatter)
+    p.add_argument("--preset", required=True, help=f"one of {', '.join(PRESETS)}")
+    p.add_argument("--out", required=True)
+    p.add_argument("--tasks", nargs="+", default=list(TASKS), metavar="TASK")
+    p.add_argument("--algos", nargs="+", default=list(ALGOS), metavar="ALGO")
+    p.add_argument("--ablations", action="store_true",
+                   help=f"also ROLL without matching loss / LSTM / object-VAE on {ABLATION_TASK}")
+    p.add_argument("--seeds", type=int, default=6, help="seeds per run (vmapped), default 6")
+    p.add_argument("--seed", type=int, default=0, help="base PRNG seed of every run")
+    p.add_argument("--devices", default="all", help="'all' or N: shard the seeds over devices")
+    p.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE",
+                   help="config overrides for every run (as train.py --set)")
+    p.add_argument("--report-only", action="store_true",
+                   help="train nothing; draw the figures and table from the runs on disk")
+    p.add_argument("--dry-run", action="store_true", help="print the plan; train nothing")
+    a = p.parse_args(argv)
+    if a.preset not in PRESETS:
+        p.error(f"unknown --preset {a.preset!r}; expected one of {', '.join(PRESETS)}")
+    for name, given, known in (("--tasks", a.tasks, TASKS), ("--algos", a.algos, ALGOS)):
+        unknown = [x for x in given if x not in known]
+        if unknown:
+            p.error(f"unknown {name} {', '.join(map(repr, unknown))}; expected some of "
+                    f"{', '.join(known)}")
+        if len(set(given)) != len(given):
+            p.error(f"{name} lists a value twice: {' '.join(given)}")
+    if a.seeds < 1:
+        p.error(f"--seeds must be >= 1, got {a.seeds}")
+    if a.report_only and a.dry_run:
+        p.error("--report-only and --dry-run contradict each other (one draws, one only plans)")
+    try:
+        over = train.parse_overrides(a.set)
+    except ValueError as e:
+        p.error(str(e))
+    clash = sorted(set(over.get("", {})) & set(GRID_FIELDS))
+    if clash:
+        p.error(f"--set {', '.join(clash)}: the grid sets these itself (use --tasks / --algos / "
+                f"--preset / --seeds / --ablations); they contradict it")
+    return a, p
+
+
+def plan(a) -> list[Cell]:
+    """Every cell of the grid, its config built (ValueError on a contradiction)."""
+    wanted = [(t, v) for t in a.tasks for v in a.algos]
+    if a.ablations:
+        wanted += [(ABLATION_TASK, v) for v in ABLATIONS if (ABLATION_TASK, v) not in wanted]
+    cells = []
+    for task, variant in wanted:
+        algo, flags = VARIANTS[variant]
+        cfg = train.build_config(task, algo, a.preset, seeds=a.seeds, overrides=a.set, **flags)
+        cells.append(Cell(task, variant, cfg, run_dir(a.out, task, variant)))
+    return cells
+
+
+def check_existing(cells: list[Cell]) -> None:
+    """A run dir that holds another config (finished or not) is never touched: refuse the
+    whole grid before anything runs."""
+    for c in cells:
+        if os.path.exists(os.path.join(c.out, "config.json")):
+            try:
+                train.check_resume(c.out, c.cfg)
+            except ValueError as e:
+                state = "finished" if train.is_complete(c.out) else "unfinished"
+                raise ValueError(f"{c.out} holds a {state} run of another config ({e}); use "
+                                 f"another --out or the same settings") from None
+
+
+def status(c: Cell) -> str:
+    if train.is_complete(c.out):
+        return "done"
+    return "resume" if os.path.exists(os.path.join(c.out, "config.json")) else "new"
+
+
+def run_grid(cells: list[Cell], a, run_fn=None) -> dict[str, str]:
+    """Train every cell that is not finished; returns cell dir -> what happened."""
+    run_fn = run_fn or train.run
+    done: dict[str, str] = {}
+    for i, c in enumerate(cells):
+        what = status(c)
+        tag = f"[{i + 1}/{len(cells)}] {c.task} {c.variant} ({c.cfg.seeds} seeds)"
+        if what == "done":
+            print(f"{tag}: finished before, skipped", flush=True)
+            done[c.out] = "skipped"
+            continue
+        print(f"{tag}: {'resuming' if what == 'resume' else 'starting'} in {c.out}", flush=True)
+        t0 = time.time()
+        seg = os.path.join(os.path.dirname(os.path.dirname(c.out)), "segmentation", c.task)
+        run_fn(c.cfg, c.out, resume=what == "resume", seg_ckpt=seg, seed=a.seed,
+               devices=a.devices, progress=True)
+        print(f"{tag}: done in {time.time() - t0:.0f} s", flush=True)
+        done[c.out] = "resumed" if what == "resume" else "ran"
+    return done
+
+
+# ----------------------------------------------------------------------------- report
+
+def read_metrics(path: str) -> list[dict]:
+    with open(path) as f:
+        return [{k: (int(float(v)) if k in ("seed", "env_steps") else float(v))
+                 for k, v in r.items()} for r in csv.DictReader(f)]
+
+
+def final_stats(rows: list[dict], key: str = METRIC) -> dict:
+    """median / 25th / 75th percentile over seeds at the last evaluated env step."""
+    steps, med, lo, hi = train.seed_quantiles(rows, key)
+    return {"env_steps": int(steps[-1]), "seeds": sum(int(r["env_steps"] == steps[-1]) for r in rows),
+            "median": float(med[-1]), "q25": float(lo[-1]), "q75": float(hi[-1])}
+
+
+def _panels(n: int):
+    plt = train.pyplot()
+    cols = min(n, 3)
+    rows = -(-n // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.3 * rows), squeeze=False)
+    for ax in axes.flat[n:]:
+        ax.set_visible(False)
+    return plt, fig, list(axes.flat[:n])
+
+
+def figure4(curves: dict[str, dict[str, list[dict]]], path: str) -> None:
+    """One panel per task; in each, median and 25-75% band over seeds per algorithm."""
+    plt, fig, axes = _panels(max(len(curves), 1))
+    for ax, (task, by_algo) in zip(axes, curves.items()):
+        for variant, rows in by_algo.items():
+            if rows:
+                train.plot_median_band(ax, rows, LABELS.get(variant, variant))
+        if not any(by_algo.values()):
+            ax.text(0.5, 0.5, "no results yet", ha="center", va="center", transform=ax.transAxes)
+        ax.set_title(task)
+        ax.legend(fontsize=7)
+    fig.suptitle("final distance to goal: median over seeds, band 25-75%", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def ablation_figure(by_variant: dict[str, list[dict]], path: str) -> None:
+    plt, fig, (ax,) = _panels(1)
+    for variant, rows in by_variant.items():
+        if rows:
+            train.plot_median_band(ax, rows, LABELS.get(variant, variant))
+    ax.set_title(f"ablations on {ABLATION_TASK} (median, 25-75%)")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+TABLE_FIELDS = ("task", "algo", "env_steps", "seeds", "median", "q25", "q75", "complete")
+
+
+def results_table(entries: list[dict], out: str) -> None:
+    """DIR/results.csv and DIR/results.md: final distance per task / algorithm."""
+    with open(os.path.join(out, "results.csv"), "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=TABLE_FIELDS)
+        w.writeheader()
+        w.writerows(entries)
+    lines = [f"# Final distance to goal ({METRIC}, lower is better)", "",
+             "Median and 25th-75th percentile over seeds at the last evaluation of each run.", "",
+             "| task | algorithm | env steps | seeds | median | 25% | 75% | complete |",
+             "|---|---|---|---|---|---|---|---|"]
+    for e in entries:
+        lines.append(f"| {e['task']} | {LABELS.get(e['algo'], e['algo'])} | {e['env_steps']} | "
+                     f"{e['seeds']} | {e['median']:.4f} | {e['q25']:.4f} | {e['q75']:.4f} | "
+                     f"{'yes' if e['complete'] else 'no'} |")
+    with open(os.path.join(out, "results.md"), "w") as f:
+        f.write("\n".join(lines) + "\n")
+
+
+def report(cells: list[Cell], out: str, ablations: bool) -> list[dict]:
+    """Figures and table from whatever metrics.csv the cells have (missing ones: left out)."""
+    rows_of = {}
+    for c in cells:
+        path = os.path.join(c.out, "metrics.csv")
+        rows_of[(c.task, c.variant)] = read_metrics(path) if os.path.exists(path) else []
+    main = [c for c in cells if c.variant in ALGOS]
+    curves: dict[str, dict[str, list[dict]]] = {}
+    for c in main:
+        curves.setdefault(c.task, {})[c.variant] = rows_of[(c.task, c.variant)]
+    os.makedirs(out, exist_ok=True)
+    if curves:
+        figure4(curves, os.path.join(out, "figure4.png"))
+    if ablations:
+        ablation_figure({v: rows_of.get((ABLATION_TASK, v), []) for v in ABLATIONS},
+                        os.path.join(out, "ablations.png"))
+    entries = []
+    for c in cells:
+        rows = rows_of[(c.task, c.variant)]
+        if rows:
+            entries.append({"task": c.task, "algo": c.variant, **final_stats(rows),
+                            "complete": train.is_complete(c.out)})
+    results_table(entries, out)
+    return entries
+
+
+def main(argv=None, run_fn=None) -> int:
+    a, p = parse_args(argv)
+    try:
+        cells = plan(a)
+        check_existing(cells)
+        if not (a.report_only or a.dry_run):
+            from roll_jax import sharding
+
+            sharding.resolve(a.devices, a.seeds)
+    except (ValueError, TypeError) as e:
+        p.error(str(e))
+    if a.dry_run:
+        for c in cells:
+            print(f"{status(c):6s} {c.task} {c.variant} -> {c.out}")
+        return 0
+    os.makedirs(a.out, exist_ok=True)
+    if not a.report_only:
+        run_grid(cells, a, run_fn)
+    entries = report(cells, a.out, a.ablations)
+    print(json.dumps({"out": a.out, "results": entries}, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,205 @@
+"""Seed sharding over 2 (forced host) devices gives the same training as one device.
+
+The device count of a JAX process is fixed at start-up, so the runs happen in one subprocess
+with XLA_FLAGS=--xla_force_host_platform_device_count=2: a 4-seed, 1-chunk run sharded over
+both devices (2 seeds each), then the same run unsharded (devices=1, reusing the first run's
+segmentation and encoders); metrics and the final checkpointed state must agree, and each run
+resumes on the other device count. The compilation cache of the other tests is shared (the
+device-count flag is not part of its key).
+
+Not bit-exact: XLA:CPU's 2-device program computes one MJX `env.step` within a float32 ulp of
+the 1-device one (`env.reset` and SAC updates alone are exact; `shard_map` instead of jit
+shardings differs the same way), and 100 steps of training amplify that to <1e-2 relative in
+the metrics, a few percent in some parameters and a few flipped replay pixels. The tolerances
+below are 4-8x what that gives and far below what a sharding bug gives (another seed's key or
+state: O(1) differences). 2 seeds per device, not 1: a vmapped convolution of batch 1
+compiles to another kernel (more roundoff, same story).
+"""
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+from roll_jax import sharding
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+SCRIPT = textwrap.dedent("""
+    import dataclasses, json, os, sys, time
+    import jax
+    jax.config.update("jax_compilation_cache_dir", sys.argv[2])
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
+    import numpy as np
+    import orbax.checkpoint as ocp
+    from jax.sharding import PartitionSpec as P
+    from configs.segmentation import segmentation_config
+    from configs.train import make_config
+    from roll_jax import loop, sharding, train
+
+    assert jax.device_count() == 2, jax.devices()
+    base = sys.argv[1]
+    report = {}
+    try:
+        sharding.resolve("all", 3)
+    except ValueError as e:
+        report["indivisible"] = str(e)
+
+    # Toy check of the placement itself: state split, outputs pinned, frozen replicated.
+    sh = sharding.make("all", 2)
+    f = sh.wrap_chunk(jax.jit(jax.vmap(lambda s, fr, p: (s + fr * p, s.sum()),
+                                       in_axes=(0, None, None))))
+    st, m = f(sh.shard(np.arange(8.0).reshape(2, 4)), sh.replicate(np.float32(2.0)), 3.0)
+    report["toy"] = {"seed_sharded": st.sharding.spec == P("seeds"), "shards": [list(s.data.shape)
+                     for s in st.addressable_shards], "value": np.asarray(st).tolist(),
+                     "metric": np.asarray(m).tolist()}
+
+    # Segmentation and pre-training as in test_train (shared compiles); one 100-step chunk of
+    # 2 envs per seed, SAC learning from step 50, LSTM and scene-VAE trained in the chunk.
+    seg = segmentation_config("puck_push", "smoke", n_frames=300, unet_epochs=2, eval_states=8)
+    base_cfg = make_config("puck_push", "roll", "smoke", n_eval_goals=2, segmentation=seg)
+    cfg = make_config("puck_push", "roll", "smoke", seeds=4, n_envs=2, epoch_env_steps=100,
+                      total_env_steps=100, n_eval_goals=2, segmentation=seg,
+                      sac=dataclasses.replace(base_cfg.sac, learning_starts=50),
+                      lstm=dataclasses.replace(base_cfg.lstm, online_schedule=((2**62, 100, 2),)))
+    seen = []
+    compile_chunk = loop.compile_chunk
+
+    def recording(cfg, env):
+        chunk = compile_chunk(cfg, env)
+
+        def call(state, frozen, plan):
+            leaves = [x for x in jax.tree.leaves(state) if x.size]
+            seen.append({
+                "seed_sharded": all(getattr(x.sharding, "spec", None) == P("seeds")
+                                    for x in leaves),
+                "devices": sorted({len(x.sharding.device_set) for x in leaves}),
+                "frozen_replicated": all(getattr(x.sharding, "spec", None) == P()
+                                         for x in jax.tree.leaves(frozen))})
+            return chunk(state, frozen, plan)
+        return call
+
+    loop.compile_chunk = recording
+    out = {}
+    for name, devices in (("sharded", "all"), ("single", 1)):
+        d = os.path.join(base, name)
+        kw = {} if name == "sharded" else {
+            "seg_ckpt": os.path.join(base, "sharded", "segmentation"),
+            "enc_ckpt": os.path.join(base, "sharded", "encoders")}
+        t0 = time.time()
+        rows = train.run(cfg, d, progress=False, devices=devices, **kw)
+        ck = ocp.StandardCheckpointer()
+        state = ck.restore(os.path.abspath(os.path.join(d, "ckpt", "1", "default")))
+        ck.close()
+        np.savez(os.path.join(base, name + ".npz"), **{k: np.asarray(v) for k, v in state.items()})
+        with open(os.path.join(d, train.COMPLETE_MARKER)) as fh:
+            marker = json.load(fh)
+        out[name] = {"rows": rows, "seen": seen[-1], "marker": marker,
+                     "wall_s": round(time.time() - t0, 1)}
+    report["runs"] = out
+    # Each finished run resumed on the other device count: its checkpoint restores there
+    # (nothing left to train: no chunk is compiled).
+    report["cross_resume"] = {
+        name: train.run(cfg, os.path.join(base, name), resume=True, progress=False,
+                        devices=devices, seg_ckpt=os.path.join(base, "sharded", "segmentation"),
+                        enc_ckpt=os.path.join(base, "sharded", "encoders"))
+        for name, devices in (("sharded", 1), ("single", "all"))}
+    print("REPORT " + json.dumps(report))
+    with open(os.path.join(base, "report.json"), "w") as fh:
+        json.dump(report, fh)
+""")
+
+
+@pytest.fixture(scope="module")
+def two_device_runs(tmp_path_factory):
+    base = tmp_path_factory.mktemp("sharding")
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2",
+               JAX_PLATFORMS="cpu", MUJOCO_GL="disable")
+    proc = subprocess.run([sys.executable, "-c", SCRIPT, str(base), os.path.join(ROOT, ".jax_cache")],
+                          cwd=ROOT, env=env, capture_output=True, text=True, timeout=1800,
+                          check=False)
+    lines = [line for line in proc.stdout.splitlines() if line.startswith("REPORT ")]
+    assert proc.returncode == 0 and lines, proc.stderr[-4000:]
+    return base, json.loads(lines[-1][len("REPORT "):])
+
+
+def test_indivisible_seeds_rejected(two_device_runs):
+    _, report = two_device_runs
+    assert "--seeds 3 is not divisible by the 2 devices" in report["indivisible"]
+
+
+def test_placement(two_device_runs):
+    _, report = two_device_runs
+    toy = report["toy"]
+    assert toy["seed_sharded"]
+    assert toy["shards"] == [[1, 4], [1, 4]]
+    np.testing.assert_array_equal(toy["value"], np.arange(8.0).reshape(2, 4) + 6.0)
+    assert toy["metric"] == [6.0, 22.0]
+    sharded, single = report["runs"]["sharded"], report["runs"]["single"]
+    assert sharded["seen"]["seed_sharded"] and sharded["seen"]["frozen_replicated"]
+    assert sharded["seen"]["devices"] == [2]
+    assert single["seen"]["devices"] == [1] and not single["seen"]["seed_sharded"]
+    assert sharded["marker"]["devices"] == 2 and single["marker"]["devices"] == 1
+
+
+def test_sharded_equals_unsharded(two_device_runs):
+    base, report = two_device_runs
+    a, b = report["runs"]["sharded"]["rows"], report["runs"]["single"]["rows"]
+    assert len(a) == len(b) == 4
+    assert all(r["q_loss"] > 0 and r["lstm_loss"] > 0 for r in a)  # SAC and LSTM did learn
+    for ra, rb in zip(a, b):
+        assert ra.keys() == rb.keys()
+        for k in ra:
+            np.testing.assert_allclose(ra[k], rb[k], rtol=0.05, atol=1e-6, err_msg=k)
+    finals = [r["final_distance"] for r in b]
+    assert len(set(finals)) == len(finals)  # the seeds differ (a swap would show above)
+    sa, sb = np.load(base / "sharded.npz"), np.load(base / "single.npz")
+    assert sorted(sa.files) == sorted(sb.files)
+    for k in sa.files:
+        x, y = sa[k], sb[k]
+        assert x.shape == y.shape and x.dtype == y.dtype, k
+        if x.dtype.kind != "f":  # replay images, indices, counters
+            assert np.mean(x != y) <= 1e-4, k
+            continue
+        for s in range(x.shape[0]):
+            diff = np.linalg.norm(x[s].astype(np.float64) - y[s])
+            assert diff <= 0.25 * np.linalg.norm(y[s].astype(np.float64)) + 1e-6, (k, s)
+
+
+def test_resume_on_other_device_count(two_device_runs):
+    _, report = two_device_runs
+    for name, rows in report["cross_resume"].items():
+        assert rows == report["runs"][name]["rows"], name
+
+
+def test_resolve_single_process():
+    """This process has one CPU device: 'all' is it; asking for more fails with both numbers."""
+    import jax
+
+    n = jax.device_count()
+    assert len(sharding.resolve("all", n)) == n
+    assert sharding.make(1, 3) is None
+    with pytest.raises(ValueError, match=f"--devices {n + 1}: only {n} device"):
+        sharding.resolve(str(n + 1), 2 * (n + 1))
+    for bad in ("0", "two", -1):
+        with pytest.raises(ValueError, match="'all' or a positive integer"):
+            sharding.parse_devices(bad)
+
+
+def test_cli_checks_devices_before_compiling(tmp_path, capsys, monkeypatch):
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("train_cli", os.path.join(ROOT, "train.py"))
+    cli = importlib.util.module_from_spec(spec)
+    monkeypatch.setitem(sys.modules, "train_cli", cli)
+    spec.loader.exec_module(cli)
+    out = str(tmp_path / "run")
+    with pytest.raises(SystemExit):
+        cli.parse_args(["--seeds", "3", "--devices", "2", "--out", out])
+    assert "--devices 2: only 1 device(s) available" in capsys.readouterr().err
+    a, cfg, _ = cli.parse_args(["--seeds", "3", "--devices", "1", "--out", out])
+    assert a.devices == "1" and cfg.seeds == 3 and not os.path.exists(out)
