@@ -23,7 +23,7 @@ AXIS = "seeds"
 
 
 def parse_devices(spec) -> int | None:
-    """'all' (or None) -> None (every device); 'N' / N -> N >= 1."""
+    """'all' (or None) -> None (as many devices as divide the seeds); 'N' / N -> N >= 1."""
     if spec is None or spec == "all":
         return None
     try:
@@ -40,7 +40,9 @@ def resolve(spec, seeds: int) -> list:
     n = parse_devices(spec)
     available = jax.devices()
     if n is None:
-        n = len(available)
+        # 'all': as many devices as split the seeds evenly (so `--seeds 1`, the default, and
+        # `make train`'s 2 seeds run on any machine); an explicit N is taken literally.
+        n = max(d for d in range(1, len(available) + 1) if seeds % d == 0)
     elif n > len(available):
         raise ValueError(f"--devices {n}: only {len(available)} device(s) available "
                          f"({available[0].platform})")
