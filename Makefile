@@ -15,10 +15,11 @@ train: $(STAMP)
 	$(VENV)/bin/python train.py --task puck_push --algo roll --preset smoke --seeds 2 --out runs/puck_push_roll_smoke
 
 # Two workers, whole files per worker (module fixtures are built once): XLA compiles on one
-# core, so two files compile side by side on a 2-core machine.
+# core, so two files compile side by side on a 2-core machine. Files go out in the order
+# tests/conftest.py sorts them (the two slowest first, one per worker), not by test count.
 TEST_WORKERS ?= 2
 test: $(STAMP)
-	$(VENV)/bin/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile
+	$(VENV)/bin/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder
 
 bench: $(STAMP)
 	$(VENV)/bin/python bench/envs.py

@@ -375,10 +375,58 @@ def plot(result: dict, cfg: BenchConfig, path: str) -> None:
     plt.close(fig)
 
 
+def run_roll(args) -> dict:
+    """Item 9b: ROLL itself (train.run, the compiled loop) on `--task`; the median final object
+    distance over seeds against env steps -> JSON + PNG beside it."""
+    import shutil
+
+    from roll_jax import train
+
+    sets = list(args.set)
+    if not any(x.startswith("total_env_steps=") for x in sets):
+        sets.append(f"total_env_steps={args.total_env_steps}")
+    cfg = train.build_config(args.task, "roll", args.preset, seeds=args.seeds, overrides=sets)
+    print(f"jax {jax.__version__} on {jax.devices()[0]} ({os.cpu_count()} CPUs, load "
+          f"{os.getloadavg()[0]:.1f}); ROLL {args.task} preset {args.preset}, {cfg.seeds} seeds, "
+          f"{cfg.total_env_steps} env steps per seed", flush=True)
+    load0 = os.getloadavg()[0]
+    t0 = time.perf_counter()
+    rows = train.run(cfg, args.run_dir, seg_ckpt=args.seg_ckpt, enc_ckpt=args.enc_ckpt,
+                     seed=args.seed, progress=True)
+    wall = time.perf_counter() - t0
+    steps, med, q25, q75 = train.seed_quantiles(rows)
+    out = {"mode": "roll", "task": args.task, "preset": args.preset, "seeds": cfg.seeds,
+           "total_env_steps": cfg.total_env_steps, "overrides": sets,
+           "seg_ckpt": args.seg_ckpt, "enc_ckpt": args.enc_ckpt,
+           "curve": {"env_steps": steps.tolist(), "median_final_distance": med.tolist(),
+                     "q25": q25.tolist(), "q75": q75.tolist()},
+           "wall_s_incl_setup_and_compile": round(wall, 1),
+           "device": str(jax.devices()[0]), "jax": jax.__version__,
+           "load_avg_start_end": [round(load0, 2), round(os.getloadavg()[0], 2)]}
+    os.makedirs(os.path.dirname(args.out), exist_ok=True)
+    with open(args.out, "w") as f:
+        json.dump(out, f, indent=2)
+    shutil.copy(os.path.join(args.run_dir, "plots", "learning_curve.png"),
+                os.path.splitext(args.out)[0] + ".png")
+    for s_, m_, a_, b_ in zip(steps, med, q25, q75):
+        print(f"env steps {int(s_):7d}: median final distance {m_ * 100:.2f} cm "
+              f"(25-75%: {a_ * 100:.2f}-{b_ * 100:.2f})")
+    print(f"wrote {args.out} ({wall:.0f} s)")
+    return out
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     d = BenchConfig()
-    p.add_argument("--mode", default="oracle", choices=["oracle"])
+    p.add_argument("--mode", default="oracle", choices=["oracle", "roll"],
+                   help="roll: the real ROLL loop (train.run) with --preset/--seg-ckpt/--set")
+    p.add_argument("--preset", default="smoke", choices=["smoke", "paper"], help="roll mode only")
+    p.add_argument("--seg-ckpt", default=None, help="roll mode: a fitted segmentation")
+    p.add_argument("--enc-ckpt", default=None, help="roll mode: pretrained encoders")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="roll mode: config overrides as in train.py")
+    p.add_argument("--run-dir", default=os.path.join(ROOT, "runs", "learning_roll"),
+                   help="roll mode: the training run's output folder")
     p.add_argument("--task", default=d.task)
     p.add_argument("--seeds", type=int, default=d.seeds)
     p.add_argument("--seed", type=int, default=0)
@@ -395,13 +443,18 @@ def main() -> None:
     p.add_argument("--learning-starts", type=int, default=d.sac.learning_starts)
     p.add_argument("--reward-scale", type=float, default=d.sac.reward_scale)
     p.add_argument("--tau", type=float, default=d.sac.tau)
-    p.add_argument("--out", default=os.path.join(RESULTS, "learning_oracle.json"))
+    p.add_argument("--out", default=None,
+                   help="JSON path (default bench/results/learning_<mode>.json)")
     p.add_argument("--no-cache", action="store_true", help="no persistent compilation cache")
     args = p.parse_args()
+    args.out = args.out or os.path.join(RESULTS, f"learning_{args.mode}.json")
     if not args.no_cache:
         jax.config.update("jax_compilation_cache_dir", os.path.join(ROOT, ".jax_cache"))
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
 
+    if args.mode == "roll":
+        run_roll(args)
+        return
     sac = dataclasses.replace(d.sac, hidden=tuple(args.hidden), batch_size=args.batch_size,
                               updates_per_step=args.updates_per_step,
                               learning_starts=args.learning_starts, reward_scale=args.reward_scale,

@@ -11,8 +11,8 @@ jax.config.update("jax_compilation_cache_dir", _CACHE)
 jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
 
 # Files whose fixtures compile the whole training chunk or fit models run first, so that with
-# `pytest -n 2 --dist loadfile` (make test) the long files start at once on both workers
-# and the short ones fill in around them.
+# `pytest -n 2 --dist loadfile --no-loadscope-reorder` (make test) xdist hands the two
+# slowest files to the two workers first and the short ones fill in around them.
 _SLOW_FIRST = ("test_train.py", "test_sharding.py", "test_segmentation_pipeline.py",
                "test_analysis.py", "test_envs_render.py")
 
