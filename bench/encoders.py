@@ -56,6 +56,18 @@ def _timeit(fn, *args, repeats: int = 3, min_time: float = 1.0):
     return first, best
 
 
+def _timeit_donated(run, state, key):
+    """`_timeit` of a jitted `run(state, key) -> (state, out)` that donates its state: each
+    call feeds the previous call's state back in (a donated buffer cannot be reused)."""
+    holder = {"s": state}
+
+    def call(k):
+        holder["s"], out = run(holder["s"], k)
+        return out
+
+    return _timeit(call, key)
+
+
 def _images(key, shape, object_like: bool):
     """uint8 images; object_like: a random disc on black (segmented-image statistics) + mask."""
     if not object_like:
@@ -80,13 +92,7 @@ def bench_vae(cfg, k_steps: int, object_like: bool, key) -> dict:
             return st, m["loss"]
         return jax.lax.scan(body, state, jax.random.split(key, k_steps))
 
-    holder = {"s": state}
-
-    def call(k):
-        holder["s"], loss = run(holder["s"], k)
-        return loss
-
-    first, best = _timeit(call, key)
+    first, best = _timeit_donated(run, state, key)
     return {"batch": cfg.batch_size, "latent_dim": cfg.latent_dim,
             "matching_loss": cfg.matching_coef > 0, "steps_per_call": k_steps,
             "steps_per_s": k_steps / best, "images_per_s": k_steps * cfg.batch_size / best,
@@ -109,13 +115,7 @@ def bench_lstm(vcfg, lcfg, batch: int, horizon: int, k_steps: int, matching: boo
             return st, m["loss"]
         return jax.lax.scan(body, state, jax.random.split(key, k_steps))
 
-    holder = {"s": state}
-
-    def call(k):
-        holder["s"], loss = run(holder["s"], k)
-        return loss
-
-    first, best = _timeit(call, key)
+    first, best = _timeit_donated(run, state, key)
     return {"batch_trajectories": batch, "horizon": horizon, "hidden": lcfg.hidden,
             "layers": lcfg.layers, "matching_loss": matching, "steps_per_call": k_steps,
             "steps_per_s": k_steps / best, "compile_and_first_call_s": first}
