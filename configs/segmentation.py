@@ -32,6 +32,9 @@ class SegmentationConfig:
     # front of the arm) and their largest radius in px at 48x48.
     distractor_near_robot: float = 0.0
     distractor_max_radius: float = 8.0
+    # Not in the paper: share of distractors drawn behind the arm (painted on not-robot pixels
+    # only): the U-Net otherwise only sees the arm against the empty scene's table and wall.
+    distractor_behind_robot: float = 0.0
     robot_threshold: float = 0.5  # U-Net probability above which a pixel is robot (per task)
     # Evaluation.
     eval_states: int = 500  # issue 4: >= 500 random states with a visible object
@@ -49,6 +52,9 @@ class SegmentationConfig:
         if not 0.0 <= self.distractor_near_robot <= 1.0:
             raise ValueError("SegmentationConfig.distractor_near_robot must be in [0, 1], got "
                              f"{self.distractor_near_robot}")
+        if not 0.0 <= self.distractor_behind_robot <= 1.0:
+            raise ValueError("SegmentationConfig.distractor_behind_robot must be in [0, 1], got "
+                             f"{self.distractor_behind_robot}")
         if not self.distractor_max_radius >= 1.5:
             raise ValueError("SegmentationConfig.distractor_max_radius must be >= 1.5 px, got "
                              f"{self.distractor_max_radius}")

@@ -129,3 +129,19 @@ def test_distractors_near_robot_cover_the_robot():
     assert (lab[:-1, 40:44, 2:6] == 0).any(axis=(1, 2)).all()
     with pytest.raises(ValueError, match="distractor_near_robot"):
         segmentation_config("door_open", distractor_near_robot=1.5)
+
+
+def test_distractors_behind_robot_keep_the_robot():
+    images = jnp.zeros((32, 48, 48, 3), jnp.uint8)
+    robot = np.zeros((32, 48, 48), np.float32)
+    robot[:, 20:28, 20:28] = 1.0
+    robot = jnp.asarray(robot)
+    out, lab = pipeline.paste_distractors(jax.random.PRNGKey(2), images, robot, 1.0,
+                                          near_robot=1.0, max_radius=8.0, behind_robot=1.0)
+    out, lab = np.asarray(out), np.asarray(lab)
+    # The arm keeps its pixels and labels; the blob shows around it.
+    np.testing.assert_array_equal(lab, np.asarray(robot))
+    assert (out[:, 20:28, 20:28] == 0).all()
+    assert (out != 0).any(-1).any((1, 2)).mean() > 0.8
+    with pytest.raises(ValueError, match="distractor_behind_robot"):
+        segmentation_config("door_open", distractor_behind_robot=-0.1)

@@ -33,6 +33,9 @@ def parse_args(argv=None):
     p.add_argument("--unet-features", type=int, default=None, help="override the U-Net width")
     p.add_argument("--label-background-ratio", type=float, default=None,
                    help="override the task's MOG2 background ratio for robot labels")
+    p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                   help="override any SegmentationConfig field (repeatable), e.g. "
+                        "--set distractor_behind_robot=1.0")
     p.add_argument("--eval-only", action="store_true",
                    help="re-evaluate the checkpoint in DIR/ckpt instead of fitting")
     a = p.parse_args(argv)
@@ -41,6 +44,27 @@ def parse_args(argv=None):
     if a.preset not in PRESETS:
         p.error(f"unknown --preset {a.preset!r}; expected one of {', '.join(PRESETS)}")
     return a
+
+
+def _parse_set(items: list[str]) -> dict:
+    """--set FIELD=VALUE pairs, each value converted to the field's type."""
+    import dataclasses
+
+    from configs.segmentation import SegmentationConfig
+
+    types = {f.name: type(f.default) for f in dataclasses.fields(SegmentationConfig)}
+    out = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep or name not in types:
+            raise ValueError(f"--set {item!r}: expected FIELD=VALUE with FIELD one of "
+                             f"{', '.join(types)}")
+        kind = types[name]
+        try:
+            out[name] = (value.lower() in ("1", "true", "yes")) if kind is bool else kind(value)
+        except ValueError:
+            raise ValueError(f"--set {item!r}: {value!r} is not a {kind.__name__}") from None
+    return out
 
 
 def main(argv=None) -> dict:
@@ -60,6 +84,7 @@ def main(argv=None) -> dict:
                                         "label_background_ratio": a.label_background_ratio}.items()
                  if v is not None}
     try:
+        overrides.update(_parse_set(a.set))
         cfg = segmentation_config(a.task, a.preset, **overrides)
     except ValueError as e:
         sys.exit(f"error: {e}")

@@ -92,14 +92,16 @@ def robot_labels(background: mog2.MOG2Model, frames, background_ratio: float) ->
 
 
 def paste_distractors(key, images, labels, prob: float, near_robot: float = 0.0,
-                      max_radius: float = 8.0):
+                      max_radius: float = 8.0, behind_robot: float = 0.0):
     """Paste one object-like blob (ellipse or box, random size and colour) into each image with
     probability `prob`; its pixels become not-robot. With probability `near_robot` the blob is
-    centred on a robot-labelled pixel (the object touching or in front of the arm, as when the
-    hand holds the door or the ball), otherwise anywhere. Radii are 1.5..`max_radius` px at
+    centred on a robot-labelled pixel (the object touching the arm, as when the hand holds the
+    door or the ball), otherwise anywhere. With probability `behind_robot` the blob lies behind
+    the arm: it is painted only on not-robot pixels, so the arm keeps its labels and is seen in
+    front of a new colour (the gripper in front of the door). Radii are 1.5..`max_radius` px at
     48x48. Pure and jittable (per minibatch)."""
     n, h, w, _ = images.shape
-    ks = jax.random.split(key, 8)
+    ks = jax.random.split(key, 9)
     use = jax.random.uniform(ks[0], (n,)) < prob
     scale = min(h, w) / 48.0  # sizes below are for 48x48 images
     cy = jax.random.uniform(ks[1], (n,), minval=0, maxval=h)
@@ -118,6 +120,8 @@ def paste_distractors(key, images, labels, prob: float, near_robot: float = 0.0,
     ellipse = dy ** 2 + dx ** 2 <= 1.0
     box = (jnp.abs(dy) <= 1.0) & (jnp.abs(dx) <= 1.0)
     blob = jnp.where(is_box[:, None, None], box, ellipse) & use[:, None, None]
+    behind = jax.random.uniform(ks[8], (n,)) < behind_robot
+    blob = blob & ~(behind[:, None, None] & (labels > 0.5))
     images = jnp.where(blob[..., None], colour[:, None, None, :], images)
     labels = jnp.where(blob, jnp.zeros_like(labels), labels)
     return images, labels
@@ -137,7 +141,8 @@ def fit(env, key, cfg: SegmentationConfig, progress=None, frames=None):
     robot = robot_labels(background, frames, cfg.label_background_ratio)
     augment = lambda k, x, y: paste_distractors(k, x, y, cfg.distractor_prob,
                                                 cfg.distractor_near_robot,
-                                                cfg.distractor_max_radius)
+                                                cfg.distractor_max_radius,
+                                                cfg.distractor_behind_robot)
     state, history = unet.fit_unet(k_unet, frames, robot.astype(jnp.float32), cfg,
                                    augment_fn=augment, progress=progress)
     params = SegParams(background=background, unet=state,
