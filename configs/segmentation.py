@@ -69,12 +69,16 @@ _N_FRAMES = {"puck_push": 2000, "hurdle_bottom": 2000, "hurdle_top": 2000, "door
              "pickup": 4000}
 # Per-task U-Net probability threshold (our calibration, see docs/segmentation.md).
 _ROBOT_THRESHOLD: dict[str, float] = {"puck_push": 0.3, "hurdle_bottom": 0.1, "hurdle_top": 0.1,
-                                      "pickup": 0.2}
+                                      "pickup": 0.2, "door_open": 0.3}
 # Per-task robot-label background ratio (our calibration, see docs/segmentation.md).
 _LABEL_BACKGROUND_RATIO: dict[str, float] = {"door_open": 0.5, "pickup": 0.5}
-# Per-task distractor placement (none yet: door_open with 0.5 / 12 px measured worse, see
-# docs/segmentation.md).
-_DISTRACTORS: dict[str, dict] = {}
+# Per-task distractor placement (our calibration, see docs/segmentation.md): the door camera
+# sees the gripper in front of the door, which the empty scene never shows, so door distractors
+# are large, mostly centred on the arm, and always drawn behind it.
+_DISTRACTORS: dict[str, dict] = {
+    "door_open": {"distractor_prob": 0.7, "distractor_near_robot": 0.7,
+                  "distractor_max_radius": 12.0, "distractor_behind_robot": 1.0},
+}
 PRESETS = ("smoke", "paper")
 
 
