@@ -160,13 +160,18 @@ def save(path: str, cfg: TrainConfig, pre: Pretrained) -> None:
         ck.save(os.path.join(path, "encoders"), pre, force=True)
 
 
-def _abstract(cfg: TrainConfig) -> Pretrained:
+def initial(cfg: TrainConfig, key) -> Pretrained:
+    """Freshly initialised (untrained) encoders of the config's shape."""
     enc = goal_encoder(cfg)
-    key = jax.random.PRNGKey(0)
-    return jax.eval_shape(lambda: Pretrained(
-        scene_vae=encoders.init_vae(key, cfg.scene),
-        object_vae=None if enc.object_cfg is None else encoders.init_vae(key, enc.object_cfg),
-        lstm=encoders.init_lstm(key, cfg.lstm, enc.frame_dim) if enc.lstm else None))
+    k_s, k_o, k_l = jax.random.split(key, 3)
+    return Pretrained(
+        scene_vae=encoders.init_vae(k_s, cfg.scene),
+        object_vae=None if enc.object_cfg is None else encoders.init_vae(k_o, enc.object_cfg),
+        lstm=encoders.init_lstm(k_l, cfg.lstm, enc.frame_dim) if enc.lstm else None)
+
+
+def _abstract(cfg: TrainConfig) -> Pretrained:
+    return jax.eval_shape(lambda: initial(cfg, jax.random.PRNGKey(0)))
 
 
 def load(path: str, cfg: TrainConfig) -> Pretrained:

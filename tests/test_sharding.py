@@ -2,10 +2,11 @@
 
 The device count of a JAX process is fixed at start-up, so the runs happen in one subprocess
 with XLA_FLAGS=--xla_force_host_platform_device_count=2: a 4-seed, 1-chunk run sharded over
-both devices (2 seeds each), then the same run unsharded (devices=1, reusing the first run's
-segmentation and encoders); metrics and the final checkpointed state must agree, and each run
-resumes on the other device count. The compilation cache of the other tests is shared (the
-device-count flag is not part of its key).
+both devices (2 seeds each), then the same run unsharded (devices=1); metrics and the final
+checkpointed state must agree, and each run resumes on the other device count. Both runs load
+the same untrained segmentation and encoders (fresh initialisations saved as checkpoints):
+sharding does not care what they learned, and fitting them here would repeat test_train's
+segmentation and pre-training compiles.
 
 Not bit-exact: XLA:CPU's 2-device program computes one MJX `env.step` within a float32 ulp of
 the 1-device one (`env.reset` and SAC updates alone are exact; `shard_map` instead of jit
@@ -39,7 +40,8 @@ SCRIPT = textwrap.dedent("""
     from jax.sharding import PartitionSpec as P
     from configs.segmentation import segmentation_config
     from configs.train import make_config
-    from roll_jax import loop, sharding, train
+    from roll_jax import loop, pretrain, sharding, train
+    from roll_jax.segmentation import pipeline
 
     assert jax.device_count() == 2, jax.devices()
     base = sys.argv[1]
@@ -59,14 +61,18 @@ SCRIPT = textwrap.dedent("""
                      for s in st.addressable_shards], "value": np.asarray(st).tolist(),
                      "metric": np.asarray(m).tolist()}
 
-    # Segmentation and pre-training as in test_train (shared compiles); one 100-step chunk of
-    # 2 envs per seed, SAC learning from step 50, LSTM and scene-VAE trained in the chunk.
+    # Untrained segmentation and encoders; one 100-step chunk of 2 envs per seed, SAC learning
+    # from step 50, LSTM and scene-VAE trained in the chunk.
     seg = segmentation_config("puck_push", "smoke", n_frames=300, unet_epochs=2, eval_states=8)
     base_cfg = make_config("puck_push", "roll", "smoke", n_eval_goals=2, segmentation=seg)
     cfg = make_config("puck_push", "roll", "smoke", seeds=4, n_envs=2, epoch_env_steps=100,
                       total_env_steps=100, n_eval_goals=2, segmentation=seg,
                       sac=dataclasses.replace(base_cfg.sac, learning_starts=50),
                       lstm=dataclasses.replace(base_cfg.lstm, online_schedule=((2**62, 100, 2),)))
+    given = {"seg_ckpt": os.path.join(base, "segmentation"), "enc_ckpt": os.path.join(base, "encoders")}
+    pipeline.save(given["seg_ckpt"], "puck_push",
+                  pipeline.initial_params(48, 48, 3, seg, jax.random.PRNGKey(1)), seg)
+    pretrain.save(given["enc_ckpt"], cfg, pretrain.initial(cfg, jax.random.PRNGKey(2)))
     seen = []
     compile_chunk = loop.compile_chunk
 
@@ -88,11 +94,8 @@ SCRIPT = textwrap.dedent("""
     out = {}
     for name, devices in (("sharded", "all"), ("single", 1)):
         d = os.path.join(base, name)
-        kw = {} if name == "sharded" else {
-            "seg_ckpt": os.path.join(base, "sharded", "segmentation"),
-            "enc_ckpt": os.path.join(base, "sharded", "encoders")}
         t0 = time.time()
-        rows = train.run(cfg, d, progress=False, devices=devices, **kw)
+        rows = train.run(cfg, d, progress=False, devices=devices, **given)
         ck = ocp.StandardCheckpointer()
         state = ck.restore(os.path.abspath(os.path.join(d, "ckpt", "1", "default")))
         ck.close()
@@ -106,8 +109,7 @@ SCRIPT = textwrap.dedent("""
     # (nothing left to train: no chunk is compiled).
     report["cross_resume"] = {
         name: train.run(cfg, os.path.join(base, name), resume=True, progress=False,
-                        devices=devices, seg_ckpt=os.path.join(base, "sharded", "segmentation"),
-                        enc_ckpt=os.path.join(base, "sharded", "encoders"))
+                        devices=devices, **given)
         for name, devices in (("sharded", 1), ("single", "all"))}
     print("REPORT " + json.dumps(report))
     with open(os.path.join(base, "report.json"), "w") as fh:

@@ -323,15 +323,18 @@ def load(path: str, task: str, image_shape=(48, 48, 3)) -> tuple[SegParams, Segm
                          f"not {list(image_shape)}")
     cfg = SegmentationConfig(**meta["config"])
     h, w, c = image_shape
-    target = jax.eval_shape(lambda: _empty_params(h, w, c, cfg))
+    target = jax.eval_shape(lambda: initial_params(h, w, c, cfg))
     with ocp.StandardCheckpointer() as ckptr:
         params = ckptr.restore(os.path.join(path, "params"), target)
     return params, cfg
 
 
-def _empty_params(h: int, w: int, c: int, cfg: SegmentationConfig) -> SegParams:
+def initial_params(h: int, w: int, c: int, cfg: SegmentationConfig,
+                   key=None) -> SegParams:
+    """Unfitted params of the config's shape: an empty background model (every pixel is
+    foreground) and a freshly initialised U-Net."""
     background = mog2.init(h, w, c, history=cfg.n_frames, var_threshold=cfg.var_threshold,
                            detect_shadows=cfg.detect_shadows, n_mixtures=cfg.n_mixtures)
-    state = unet.init_unet(jax.random.PRNGKey(0), cfg.unet_features, h, w)
+    state = unet.init_unet(jax.random.PRNGKey(0) if key is None else key, cfg.unet_features, h, w)
     return SegParams(background=background, unet=state,
                      robot_threshold=jnp.float32(cfg.robot_threshold))
