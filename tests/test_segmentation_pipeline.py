@@ -51,6 +51,28 @@ def test_lower_label_background_ratio_labels_more_of_the_arm(fitted):
         segmentation_config("door_open", label_background_ratio=0.0)
 
 
+def test_mog2_parity_with_cv2_on_the_rendered_scene(fitted):
+    """The pipeline's own use, on rendered frames: fit at lr -1 on the empty-scene walks
+    (history = their number), then lr 0 on states with the puck; cv2 must agree pixel for
+    pixel on every frame, shadows on and off, and the fitted model must be the pipeline's."""
+    from roll_jax.segmentation import mog2_parity as mp
+
+    env, params, info = fitted
+    scene, _ = pipeline.random_object_states(env, jax.random.PRNGKey(4), 40)
+    frames = np.concatenate([np.asarray(info["frames"]), scene])
+    lrs = np.where(np.arange(len(frames)) < CFG.n_frames, -1.0, 0.0)
+    runs = {}
+    for shadows in (True, False):
+        r = runs[shadows] = mp.compare(frames, lrs, history=CFG.n_frames, detect_shadows=shadows)
+        assert r.min == 1.0, (shadows, np.flatnonzero(r.agreement < 1)[:10])
+        assert r.background_equal == 1.0
+        assert (r.cv2_masks[CFG.n_frames:] == 255).any()  # the puck and arm are foreground
+    # With shadows on (the config) cv2's lr-0 masks, shadows counted, are `segment`'s
+    # foreground from the pipeline's fitted model.
+    fg = np.asarray(mog2.frozen_foreground(params.background, jnp.asarray(scene)))
+    np.testing.assert_array_equal(fg, runs[True].cv2_masks[CFG.n_frames:] > 0)
+
+
 def test_unet_loss_falls(fitted):
     _, _, info = fitted
     loss = np.asarray(info["unet_loss"])
