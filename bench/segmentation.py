@@ -4,7 +4,9 @@ lr 0 AND NOT U-Net robot) in images/s at batch 1, 64, 1024, U-Net width from the
 
 Writes bench/results/segmentation.json, keys "mog2" (frames/s at batch 1, 64, 1024 of
 independent 48x48x3 models, ratio against cv2 measured in the same run) and "mog2_parity"
-(per-frame mask agreement with cv2 over 2000+ frame videos). Other keys in the file are kept.
+(per-frame mask agreement with cv2 over 2000+ frame synthetic videos) and "mog2_parity_scenes"
+(--part scenes: the same on every scene's rendered frames, as the pipeline uses them). Other
+keys in the file are kept.
 
     python bench/segmentation.py [--quick]
 """
@@ -145,6 +147,38 @@ def parity_mog2(fit=2000, test=300, kinds=("mixed", "shadows", "flicker", "multi
             "min": min(r["min"] for r in runs), "mean": float(np.mean([r["mean"] for r in runs]))}
 
 
+def parity_scenes(fit=2000, test=300, tasks=None) -> dict:
+    """ROLL's own use on every scene: fit at lr -1 (history = fit) on the empty-scene random
+    walks that `pipeline.fit` records, then lr 0 on random states with the object; cv2 on the
+    same frames, shadows on and off."""
+    import envs_mjx
+    from roll_jax.segmentation import pipeline
+
+    runs = []
+    lrs = np.where(np.arange(fit + test) < fit, -1.0, 0.0)
+    for task in tasks or envs_mjx.TASK_NAMES:
+        env = envs_mjx.make(task)
+        k_fit, k_test = jax.random.split(jax.random.PRNGKey(3))
+        empty = np.asarray(pipeline.record_empty_scene(env, k_fit, fit, n_envs=40))
+        scene, _ = pipeline.random_object_states(env, k_test, test)
+        frames = np.concatenate([empty, scene])
+        for shadows in (True, False):
+            r = mp.compare(frames, lrs, history=fit, detect_shadows=shadows)
+            runs.append({"task": task, "detect_shadows": shadows, "frames": fit + test,
+                         "min": r.min, "mean": r.mean,
+                         "min_fit": float(r.agreement[:fit].min()),
+                         "min_lr0": float(r.agreement[fit:].min()),
+                         "frames_not_exact": int((r.agreement < 1).sum()),
+                         "foreground_share_lr0": float((r.cv2_masks[fit:] > 0).mean()),
+                         "background_image_equal": r.background_equal})
+            print(f"parity {task:14s} shadows={int(shadows)}: min {r.min:.6f} mean {r.mean:.6f} "
+                  f"not exact {runs[-1]['frames_not_exact']} background {r.background_equal:.6f}",
+                  flush=True)
+    return {"frame_shape": [48, 48, 3], "history": fit, "fit_frames_lr_-1": fit,
+            "test_frames_lr_0": test, "runs": runs,
+            "min": min(r["min"] for r in runs), "mean": float(np.mean([r["mean"] for r in runs]))}
+
+
 def _rate(fn, *args, reps: int = 3) -> float:
     """Best-of-`reps` calls per second (after one warm-up call that compiles)."""
     jax.block_until_ready(fn(*args))
@@ -186,7 +220,7 @@ def bench_segment(batches=(1, 64, 1024)) -> dict:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="small batches and short videos")
-    ap.add_argument("--part", choices=("all", "mog2", "segment"), default="all")
+    ap.add_argument("--part", choices=("all", "mog2", "segment", "scenes"), default="all")
     args = ap.parse_args()
     results = {}
     if os.path.exists(RESULTS):
@@ -194,7 +228,10 @@ def main() -> None:
             results = json.load(f)
     if args.part in ("all", "segment"):
         results["segment"] = bench_segment((1, 64) if args.quick else (1, 64, 1024))
-    if args.part == "segment":
+    if args.part in ("all", "scenes"):
+        results["mog2_parity_scenes"] = (parity_scenes(fit=300, test=50, tasks=("puck_push",))
+                                         if args.quick else parity_scenes())
+    if args.part in ("segment", "scenes"):
         pass
     elif args.quick:
         results["mog2"] = bench_mog2(batches=(1, 64), warmup=5)

@@ -5,6 +5,7 @@ Figure 4, the ablation figure and a results table.
     python -m roll_jax.reproduce --preset smoke --out runs/smoke --tasks puck_push --seeds 2
     python -m roll_jax.reproduce ... --ablations            # + ROLL ablations on hurdle_top
     python -m roll_jax.reproduce ... --report-only          # redraw from the runs on disk
+    python -m roll_jax.reproduce ... --jobs 2               # 2 cells at once (CPU)
 
 Each cell is one `roll_jax.train.run` in DIR/runs/TASK__VARIANT (all seeds vmapped, sharded
 over --devices). A run with the completion marker is skipped (never rerun, never
@@ -71,6 +72,9 @@ def parse_args(argv=None):
     p.add_argument("--devices", default="all", help="'all' or N: shard the seeds over devices")
     p.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE",
                    help="config overrides for every run (as train.py --set)")
+    p.add_argument("--jobs", type=int, default=1,
+                   help="cells trained side by side in worker processes (CPU: XLA compiles on "
+                        "one core, so 2 jobs use a 2-core machine; default 1)")
     p.add_argument("--report-only", action="store_true",
                    help="train nothing; draw the figures and table from the runs on disk")
     p.add_argument("--dry-run", action="store_true", help="print the plan; train nothing")
@@ -86,6 +90,8 @@ def parse_args(argv=None):
             p.error(f"{name} lists a value twice: {' '.join(given)}")
     if a.seeds < 1:
         p.error(f"--seeds must be >= 1, got {a.seeds}")
+    if a.jobs < 1:
+        p.error(f"--jobs must be >= 1, got {a.jobs}")
     if a.report_only and a.dry_run:
         p.error("--report-only and --dry-run contradict each other (one draws, one only plans)")
     try:
@@ -131,25 +137,114 @@ def status(c: Cell) -> str:
     return "resume" if os.path.exists(os.path.join(c.out, "config.json")) else "new"
 
 
-def run_grid(cells: list[Cell], a, run_fn=None) -> dict[str, str]:
-    """Train every cell that is not finished; returns cell dir -> what happened."""
-    run_fn = run_fn or train.run
+def seg_dir(c: Cell) -> str:
+    return os.path.join(os.path.dirname(os.path.dirname(c.out)), "segmentation", c.task)
+
+
+def _uses_segmentation(c: Cell) -> bool:
+    from roll_jax.agent import goal_encoder
+
+    return goal_encoder(c.cfg).segment
+
+
+def phases(cells: list[Cell]) -> tuple[list[Cell], list[Cell]]:
+    """Split for parallel jobs: a task's segmentation is fitted by the first of its cells that
+    uses it; the task's other segmenting cells wait for it (phase 2), so no two jobs fit (or
+    write) the same segmentation. Within phase 1 the fitting cells go first (the longest)."""
+    fitter: dict[str, Cell] = {}
+    for c in cells:
+        if (_uses_segmentation(c) and c.task not in fitter
+                and not os.path.exists(os.path.join(seg_dir(c), "meta.json"))):
+            fitter[c.task] = c
+    waits = [c for c in cells if _uses_segmentation(c) and c.task in fitter
+             and fitter[c.task] is not c]
+    first = list(fitter.values()) + [c for c in cells if c not in fitter.values() and c not in waits]
+    return first, waits
+
+
+def _use_cache(path: str) -> None:
+    """JAX's persistent compilation cache in DIR/.jax_cache: cells of one task share their
+    data-collection and pre-training programs, and a resumed grid skips its compiles."""
+    import jax
+
+    jax.config.update("jax_compilation_cache_dir", path)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
+
+
+def _run_cell(cfg, out: str, resume: bool, seg_ckpt: str, seed: int, devices, cache: str):
+    """One cell in a worker process (spawned: a fresh JAX), sharing the compilation cache."""
+    _use_cache(cache)
+    from roll_jax import train as train_mod
+
+    train_mod.run(cfg, out, resume=resume, seg_ckpt=seg_ckpt, seed=seed, devices=devices,
+                  progress=False)
+
+
+def run_grid(cells: list[Cell], a, run_fn=None, pool=None) -> dict[str, str]:
+    """Train every cell that is not finished; returns cell dir -> what happened.
+
+    With a.jobs > 1 the cells run in that many worker processes (`pool`: an Executor factory
+    taking max_workers; spawned processes by default), in the two `phases`."""
     done: dict[str, str] = {}
+    todo = []
     for i, c in enumerate(cells):
         what = status(c)
         tag = f"[{i + 1}/{len(cells)}] {c.task} {c.variant} ({c.cfg.seeds} seeds)"
         if what == "done":
             print(f"{tag}: finished before, skipped", flush=True)
             done[c.out] = "skipped"
-            continue
-        print(f"{tag}: {'resuming' if what == 'resume' else 'starting'} in {c.out}", flush=True)
-        t0 = time.time()
-        seg = os.path.join(os.path.dirname(os.path.dirname(c.out)), "segmentation", c.task)
-        run_fn(c.cfg, c.out, resume=what == "resume", seg_ckpt=seg, seed=a.seed,
-               devices=a.devices, progress=True)
-        print(f"{tag}: done in {time.time() - t0:.0f} s", flush=True)
-        done[c.out] = "resumed" if what == "resume" else "ran"
+        else:
+            todo.append((c, tag, what))
+    jobs = getattr(a, "jobs", 1)
+    if jobs <= 1:
+        if run_fn is None:
+            _use_cache(os.path.join(os.path.abspath(a.out), ".jax_cache"))
+            run_fn = train.run
+        for c, tag, what in todo:
+            print(f"{tag}: {'resuming' if what == 'resume' else 'starting'} in {c.out}", flush=True)
+            t0 = time.time()
+            run_fn(c.cfg, c.out, resume=what == "resume", seg_ckpt=seg_dir(c), seed=a.seed,
+                   devices=a.devices, progress=True)
+            print(f"{tag}: done in {time.time() - t0:.0f} s", flush=True)
+            done[c.out] = "resumed" if what == "resume" else "ran"
+        return done
+
+    import concurrent.futures as cf
+    import functools
+
+    if pool is None:
+        import multiprocessing
+
+        pool = functools.partial(cf.ProcessPoolExecutor,
+                                 mp_context=multiprocessing.get_context("spawn"))
+    if run_fn is None:
+        cache = os.path.join(os.path.abspath(a.out), ".jax_cache")
+        run_fn = functools.partial(_run_cell, cache=cache)
+    else:
+        run_fn = functools.partial(_call_run_fn, run_fn)
+    info = {c.out: (tag, what) for c, tag, what in todo}
+    first, waits = phases([c for c, _, _ in todo])
+    with pool(max_workers=jobs) as ex:
+        for phase in (first, waits):
+            futures = {}
+            for c in phase:
+                tag, what = info[c.out]
+                print(f"{tag}: {'resuming' if what == 'resume' else 'starting'} in {c.out} "
+                      f"(job)", flush=True)
+                futures[ex.submit(run_fn, c.cfg, c.out, what == "resume", seg_dir(c), a.seed,
+                                  a.devices)] = (c, time.time())
+            for fut in cf.as_completed(futures):
+                c, t0 = futures[fut]
+                fut.result()  # a failed cell stops the grid (finished cells stay finished)
+                tag, what = info[c.out]
+                print(f"{tag}: done in {time.time() - t0:.0f} s", flush=True)
+                done[c.out] = "resumed" if what == "resume" else "ran"
     return done
+
+
+def _call_run_fn(run_fn, cfg, out, resume, seg_ckpt, seed, devices):
+    return run_fn(cfg, out, resume=resume, seg_ckpt=seg_ckpt, seed=seed, devices=devices,
+                  progress=False)
 
 
 # ----------------------------------------------------------------------------- report
@@ -253,7 +348,7 @@ def report(cells: list[Cell], out: str, ablations: bool) -> list[dict]:
     return entries
 
 
-def main(argv=None, run_fn=None) -> int:
+def main(argv=None, run_fn=None, pool=None) -> int:
     a, p = parse_args(argv)
     try:
         cells = plan(a)
@@ -270,7 +365,7 @@ def main(argv=None, run_fn=None) -> int:
         return 0
     os.makedirs(a.out, exist_ok=True)
     if not a.report_only:
-        run_grid(cells, a, run_fn)
+        run_grid(cells, a, run_fn, pool)
     entries = report(cells, a.out, a.ablations)
     print(json.dumps({"out": a.out, "results": entries}, indent=2))
     return 0

@@ -189,3 +189,53 @@ def test_dry_run_trains_nothing(tmp_path, capsys):
     text = capsys.readouterr().out
     assert "new    door_open roll" in text and "door_open skewfit" in text
     assert fake.calls == [] and not out.exists()
+
+
+def test_parallel_jobs_fit_each_segmentation_once_before_its_other_cells(tmp_path):
+    """--jobs 2 (threads stand in for the worker processes): every cell runs once; a task's
+    segmenting cells after the first wait until it has written the segmentation."""
+    import concurrent.futures as cf
+    import threading
+    import time as _time
+
+    from roll_jax.agent import goal_encoder
+
+    events, lock = [], threading.Lock()
+
+    class SegRun(FakeRun):
+        def __call__(self, cfg, out, seg_ckpt=None, **kw):
+            with lock:
+                events.append(("start", os.path.basename(out)))
+            uses = goal_encoder(cfg).segment
+            if uses:  # the first segmenting cell of a task fits it; the others must find it
+                fitted = os.path.exists(os.path.join(seg_ckpt, "meta.json"))
+                _time.sleep(0.05)
+                os.makedirs(seg_ckpt, exist_ok=True)
+                with open(os.path.join(seg_ckpt, "meta.json"), "w") as f:
+                    f.write("{}")
+                with lock:
+                    events.append(("fit" if not fitted else "load", os.path.basename(out)))
+            super().__call__(cfg, out, seg_ckpt=seg_ckpt, **kw)
+            with lock:
+                events.append(("end", os.path.basename(out)))
+            return []
+
+    fake, out = SegRun(), tmp_path / "grid"
+    assert reproduce.main(_args(out, "--tasks", "puck_push", "hurdle_top", "--ablations",
+                                "--seeds", "2", "--devices", "1", "--jobs", "2"),
+                          run_fn=fake, pool=cf.ThreadPoolExecutor) == 0
+    ran = sorted(os.path.basename(c["out"]) for c in fake.calls)
+    assert ran == sorted(["puck_push__roll", "puck_push__skewfit", "hurdle_top__roll",
+                          "hurdle_top__skewfit", "hurdle_top__roll_no_matching_loss",
+                          "hurdle_top__roll_no_lstm", "hurdle_top__roll_no_object_vae"])
+    fits = [name for kind, name in events if kind == "fit"]
+    assert sorted(fits) == ["hurdle_top__roll", "puck_push__roll"]  # once per task
+    for waiter in ("hurdle_top__roll_no_matching_loss", "hurdle_top__roll_no_lstm"):
+        assert events.index(("end", "hurdle_top__roll")) < events.index(("start", waiter))
+        assert ("load", waiter) in events
+    # Skew-Fit and the no-object-VAE ablation never segment: they need not wait.
+    assert not any(name.endswith(("skewfit", "no_object_vae")) for kind, name in events
+                   if kind in ("fit", "load"))
+    assert (out / "results.md").stat().st_size > 0
+    with pytest.raises(SystemExit):
+        reproduce.main(_args(out, "--jobs", "0"), run_fn=FakeRun())
