@@ -229,8 +229,8 @@ def run_grid(cells: list[Cell], a, run_fn=None, pool=None) -> dict[str, str]:
             futures = {}
             for c in phase:
                 tag, what = info[c.out]
-                print(f"{tag}: {'resuming' if what == 'resume' else 'starting'} in {c.out} "
-                      f"(job)", flush=True)
+                print(f"{tag}: queued ({'resume' if what == 'resume' else 'new'}) for "
+                      f"{jobs} jobs, {c.out}", flush=True)
                 futures[ex.submit(run_fn, c.cfg, c.out, what == "resume", seg_dir(c), a.seed,
                                   a.devices)] = (c, time.time())
             for fut in cf.as_completed(futures):
