@@ -1,0 +1,131 @@
+"""Does the object-VAE encode where the object is? Trains it on segmented puck_push images
+(object uniform in its goal space, hand uniform in its box, segmented with a fitted
+`segment`) and reports, every 250 steps, on 500 held-out images: the per-dimension spread of
+the latent means, R^2 of a linear fit of the puck's (x, y) from them, and the Spearman
+correlation between pairwise latent and pairwise puck distances.
+
+    python bench/object_vae.py --seg runs/seg/puck_push/ckpt --steps 1500 --name paper
+    python bench/object_vae.py --seg ... --name beta1_nomatch --set beta=1 matching_coef=0
+
+`--set` overrides `object_vae_config("puck_push")` fields (the paper's values by default).
+Appends one entry per run to bench/results/object_vae.json. See docs/analysis.md.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import envs_mjx
+from configs.encoders import VAEConfig, object_vae_config
+from roll_jax import analysis, encoders
+from roll_jax.segmentation import pipeline
+
+RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "object_vae.json")
+N_IMAGES, N_TEST, STEPS_PER_CALL, EVAL_EVERY = 2000, 500, 50, 250
+
+
+def _overrides(items: list[str]) -> dict:
+    types = {f.name: f.type for f in dataclasses.fields(VAEConfig)}
+    out = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep or name not in types:
+            raise SystemExit(f"--set {item!r}: expected FIELD=VALUE, FIELD one of {', '.join(types)}")
+        kind = str(types[name])
+        out[name] = (value.lower() in ("1", "true")) if "bool" in kind else (
+            int(value) if "int" in kind else float(value) if "float" in kind else value)
+    return out
+
+
+def segmented_data(env, seg, seed: int, n: int):
+    s = env.spec
+
+    @jax.jit
+    def batch(keys):
+        def one(k):
+            k_h, k_o = jax.random.split(k)
+            lo, hi = (jnp.asarray(v, jnp.float32) for v in (s.object_goal_low, s.object_goal_high))
+            pos = lo + (hi - lo) * jax.random.uniform(k_o, lo.shape)
+            h_lo, h_hi = (jnp.asarray(v, jnp.float32) for v in (s.hand_low, s.hand_high))
+            st = env.place(h_lo + (h_hi - h_lo) * jax.random.uniform(k_h, h_lo.shape), pos)
+            return env.render(st), pos
+
+        rgb, pos = jax.vmap(one)(keys)
+        masks = pipeline.segment(seg, rgb)
+        return pipeline.segmented_image(rgb, masks), masks, pos
+
+    parts = [batch(jax.random.split(jax.random.PRNGKey(seed + i), 250)) for i in range(n // 250)]
+    return tuple(jnp.concatenate(p) for p in zip(*parts))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seg", required=True, help="a puck_push segmentation checkpoint dir")
+    ap.add_argument("--steps", type=int, default=1500)
+    ap.add_argument("--name", default="paper")
+    ap.add_argument("--set", nargs="*", default=[], metavar="FIELD=VALUE")
+    a = ap.parse_args()
+    if a.steps < EVAL_EVERY or a.steps % EVAL_EVERY:
+        raise SystemExit(f"--steps must be a positive multiple of {EVAL_EVERY}, got {a.steps}")
+    cfg = object_vae_config("puck_push", **_overrides(a.set))
+    env = envs_mjx.make("puck_push")
+    seg, _ = pipeline.load(a.seg, "puck_push")
+    t0 = time.time()
+    images, masks, pos = segmented_data(env, seg, 0, N_IMAGES)
+    n_train = N_IMAGES - N_TEST
+    test_images, test_xy = images[n_train:], np.asarray(pos[n_train:])[:, :2]
+    print(f"data {time.time() - t0:.0f} s, object pixels per image "
+          f"{float(masks.sum((1, 2)).mean()):.1f}", flush=True)
+
+    @jax.jit
+    def train(state, key):
+        def body(st, k):
+            k_i, k_s = jax.random.split(k)
+            idx = jax.random.randint(k_i, (cfg.batch_size,), 0, n_train)
+            m = masks[idx] if cfg.matching_coef > 0 else None
+            return encoders.vae_train_step(st, k_s, images[idx], cfg, m)
+        return jax.lax.scan(body, state, jax.random.split(key, STEPS_PER_CALL))
+
+    rng = np.random.default_rng(0)
+    pi, pj = rng.integers(0, N_TEST, 3000), rng.integers(0, N_TEST, 3000)
+    state = encoders.init_vae(jax.random.PRNGKey(0), cfg)
+    rows = []
+    for it in range(a.steps // STEPS_PER_CALL):
+        state, m = train(state, jax.random.PRNGKey(100 + it))
+        step = (it + 1) * STEPS_PER_CALL
+        if step % EVAL_EVERY:
+            continue
+        mu = np.asarray(encoders.encode_mean(state.params, cfg, test_images), np.float64)
+        x = np.c_[mu, np.ones(len(mu))]
+        coef, *_ = np.linalg.lstsq(x, test_xy, rcond=None)
+        r2 = 1 - ((x @ coef - test_xy) ** 2).sum() / ((test_xy - test_xy.mean(0)) ** 2).sum()
+        dz = np.linalg.norm(mu[pi] - mu[pj], axis=1)
+        dp = np.linalg.norm(test_xy[pi] - test_xy[pj], axis=1)
+        row = {"step": step, "seconds": round(time.time() - t0),
+               **{k: float(v.mean()) for k, v in m.items()},
+               "mu_std": np.round(mu.std(0), 4).tolist(), "r2_xy": float(r2),
+               "spearman_pairs": analysis.spearman(dp, dz)}
+        rows.append(row)
+        print(json.dumps(row), flush=True)
+    results = []
+    if os.path.exists(RESULTS):
+        with open(RESULTS) as f:
+            results = json.load(f)
+    results.append({"name": a.name, "config": dataclasses.asdict(cfg), "seg": a.seg,
+                    "n_train": n_train, "n_test": N_TEST, "jax_backend": jax.default_backend(),
+                    "rows": rows})
+    os.makedirs(os.path.dirname(RESULTS), exist_ok=True)
+    with open(RESULTS, "w") as f:
+        json.dump(results, f, indent=1)
+    print("wrote", RESULTS)
+
+
+if __name__ == "__main__":
+    main()
