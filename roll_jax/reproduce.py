@@ -176,8 +176,10 @@ def _run_cell(cfg, out: str, resume: bool, seg_ckpt: str, seed: int, devices, ca
     _use_cache(cache)
     from roll_jax import train as train_mod
 
+    t0 = time.time()
     train_mod.run(cfg, out, resume=resume, seg_ckpt=seg_ckpt, seed=seed, devices=devices,
                   progress=False)
+    return time.time() - t0
 
 
 def run_grid(cells: list[Cell], a, run_fn=None, pool=None) -> dict[str, str]:
@@ -224,6 +226,7 @@ def run_grid(cells: list[Cell], a, run_fn=None, pool=None) -> dict[str, str]:
         run_fn = functools.partial(_call_run_fn, run_fn)
     info = {c.out: (tag, what) for c, tag, what in todo}
     first, waits = phases([c for c, _, _ in todo])
+    t_grid = time.time()
     with pool(max_workers=jobs) as ex:
         for phase in (first, waits):
             futures = {}
@@ -232,19 +235,22 @@ def run_grid(cells: list[Cell], a, run_fn=None, pool=None) -> dict[str, str]:
                 print(f"{tag}: queued ({'resume' if what == 'resume' else 'new'}) for "
                       f"{jobs} jobs, {c.out}", flush=True)
                 futures[ex.submit(run_fn, c.cfg, c.out, what == "resume", seg_dir(c), a.seed,
-                                  a.devices)] = (c, time.time())
+                                  a.devices)] = c
             for fut in cf.as_completed(futures):
-                c, t0 = futures[fut]
-                fut.result()  # a failed cell stops the grid (finished cells stay finished)
+                c = futures[fut]
+                seconds = fut.result()  # a failed cell stops the grid (finished cells stay)
                 tag, what = info[c.out]
-                print(f"{tag}: done in {time.time() - t0:.0f} s", flush=True)
+                print(f"{tag}: done in {seconds:.0f} s (its own run time; grid at "
+                      f"{time.time() - t_grid:.0f} s)", flush=True)
                 done[c.out] = "resumed" if what == "resume" else "ran"
     return done
 
 
 def _call_run_fn(run_fn, cfg, out, resume, seg_ckpt, seed, devices):
-    return run_fn(cfg, out, resume=resume, seg_ckpt=seg_ckpt, seed=seed, devices=devices,
-                  progress=False)
+    t0 = time.time()
+    run_fn(cfg, out, resume=resume, seg_ckpt=seg_ckpt, seed=seed, devices=devices,
+           progress=False)
+    return time.time() - t0
 
 
 # ----------------------------------------------------------------------------- report
