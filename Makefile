@@ -19,7 +19,7 @@ train: $(STAMP)
 # tests/conftest.py sorts them (the two slowest first, one per worker), not by test count.
 TEST_WORKERS ?= 2
 test: $(STAMP)
-	$(VENV)/bin/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder
+	$(VENV)/bin/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder --durations=15
 
 bench: $(STAMP)
 	$(VENV)/bin/python bench/envs.py
