@@ -94,7 +94,9 @@ def test_equal_keys_give_equal_seeds(runs):
     env = envs_mjx.make(cfg.task)
     frozen, pre = train.setup(cfg, env, jax.random.PRNGKey(0), full, progress=False)
     key = jax.random.PRNGKey(7)
-    state = jax.vmap(lambda k: loop.init_state(k, cfg, env, pre.scene_vae, pre.lstm))(
+    # Built as train.init_seeds builds it (one jit), so the chunk's input types are the run's
+    # and its compiled program comes from the persistent cache instead of a second compile.
+    state = jax.jit(jax.vmap(lambda k: loop.init_state(k, cfg, env, pre.scene_vae, pre.lstm)))(
         jax.numpy.stack([key, key]))
     state, m = loop.compile_chunk(cfg, env)(state, frozen, loop.plan_chunk(cfg, 0))
     for leaf in jax.tree.leaves((state.sac, m)):
