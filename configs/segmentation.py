@@ -21,7 +21,7 @@ class SegmentationConfig:
     label_background_ratio: float = 0.9
     n_envs: int = 40  # parallel random walks from random hand positions (ours; covers the hand box)
     # Robot U-Net.
-    unet_features: int = 16  # not in the paper (ours): 16..128 wide; 64 is milesial's, 16x the CPU cost
+    unet_features: int = 16  # not in the paper (ours): 16..128 wide; 64 is milesial's, 16x the CPU cost; per task below
     unet_epochs: int = 30  # Appendix B.1
     unet_lr: float = 1e-3  # Appendix B.1
     unet_momentum: float = 0.9  # Appendix B.1 (Nesterov)
@@ -70,6 +70,9 @@ _N_FRAMES = {"puck_push": 2000, "hurdle_bottom": 2000, "hurdle_top": 2000, "door
 # Per-task U-Net probability threshold (our calibration, see docs/segmentation.md).
 _ROBOT_THRESHOLD: dict[str, float] = {"puck_push": 0.3, "hurdle_bottom": 0.1, "hurdle_top": 0.1,
                                       "pickup": 0.2, "door_open": 0.3}
+# Per-task U-Net width: the width each task's targets were measured with (docs/segmentation.md);
+# the others use the default 16.
+_UNET_FEATURES: dict[str, int] = {"hurdle_bottom": 8, "hurdle_top": 8, "pickup": 8}
 # Per-task robot-label background ratio (our calibration, see docs/segmentation.md).
 _LABEL_BACKGROUND_RATIO: dict[str, float] = {"door_open": 0.5, "pickup": 0.5}
 # Per-task distractor placement (our calibration, see docs/segmentation.md): the door camera
@@ -91,6 +94,8 @@ def segmentation_config(task: str, preset: str = "paper", **overrides) -> Segmen
     values = {"n_frames": _N_FRAMES[task]}
     if task in _ROBOT_THRESHOLD:
         values["robot_threshold"] = _ROBOT_THRESHOLD[task]
+    if task in _UNET_FEATURES:
+        values["unet_features"] = _UNET_FEATURES[task]
     values.update(_DISTRACTORS.get(task, {}))
     if task in _LABEL_BACKGROUND_RATIO:
         values["label_background_ratio"] = _LABEL_BACKGROUND_RATIO[task]
