@@ -24,24 +24,12 @@ import numpy as np
 
 import envs_mjx
 from configs.encoders import VAEConfig, object_vae_config
+from configs.overrides import field_overrides
 from roll_jax import analysis, encoders
 from roll_jax.segmentation import pipeline
 
 RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "object_vae.json")
 N_IMAGES, N_TEST, STEPS_PER_CALL, EVAL_EVERY = 2000, 500, 50, 250
-
-
-def _overrides(items: list[str]) -> dict:
-    types = {f.name: f.type for f in dataclasses.fields(VAEConfig)}
-    out = {}
-    for item in items:
-        name, sep, value = item.partition("=")
-        if not sep or name not in types:
-            raise SystemExit(f"--set {item!r}: expected FIELD=VALUE, FIELD one of {', '.join(types)}")
-        kind = str(types[name])
-        out[name] = (value.lower() in ("1", "true")) if "bool" in kind else (
-            int(value) if "int" in kind else float(value) if "float" in kind else value)
-    return out
 
 
 def segmented_data(env, seg, seed: int, n: int):
@@ -74,7 +62,10 @@ def main() -> None:
     a = ap.parse_args()
     if a.steps < EVAL_EVERY or a.steps % EVAL_EVERY:
         raise SystemExit(f"--steps must be a positive multiple of {EVAL_EVERY}, got {a.steps}")
-    cfg = object_vae_config("puck_push", **_overrides(a.set))
+    try:
+        cfg = object_vae_config("puck_push", **field_overrides(VAEConfig, a.set))
+    except ValueError as e:
+        raise SystemExit(f"error: {e}") from None
     env = envs_mjx.make("puck_push")
     seg, _ = pipeline.load(a.seg, "puck_push")
     t0 = time.time()

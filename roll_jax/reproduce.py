@@ -26,6 +26,7 @@ import os
 import sys
 import time
 
+from configs.overrides import parse_overrides
 from configs.train import ALGOS, PRESETS, TASKS
 from roll_jax import train
 
@@ -95,7 +96,7 @@ def parse_args(argv=None):
     if a.report_only and a.dry_run:
         p.error("--report-only and --dry-run contradict each other (one draws, one only plans)")
     try:
-        over = train.parse_overrides(a.set)
+        over = parse_overrides(a.set)
     except ValueError as e:
         p.error(str(e))
     clash = sorted(set(over.get("", {})) & set(GRID_FIELDS))

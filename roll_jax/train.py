@@ -9,7 +9,6 @@ gets `COMPLETE_MARKER` (complete.json), written atomically last.
 
 from __future__ import annotations
 
-import ast
 import csv
 import dataclasses
 import json
@@ -20,6 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from configs.overrides import parse_overrides
 from configs.train import TrainConfig
 from roll_jax import loop, pretrain
 from roll_jax import sharding as shd
@@ -51,23 +51,6 @@ class TrainingDiverged(RuntimeError):
 
 def _config_json(cfg: TrainConfig) -> dict:
     return json.loads(json.dumps(dataclasses.asdict(cfg)))
-
-
-def parse_overrides(items) -> dict:
-    """KEY=VALUE (top-level TrainConfig fields) or GROUP.KEY=VALUE (sac., lstm., scene_vae.,
-    object_vae., segmentation.) -> {group: {field: Python literal}} ('' = top level)."""
-    out: dict = {}
-    for item in items:
-        if "=" not in item:
-            raise ValueError(f"--set {item!r}: expected KEY=VALUE")
-        key, raw = item.split("=", 1)
-        try:
-            value = ast.literal_eval(raw)
-        except (ValueError, SyntaxError):
-            value = raw
-        group, _, field = key.rpartition(".")
-        out.setdefault(group, {})[field] = value
-    return out
 
 
 def build_config(task: str, algo: str, preset: str, seeds: int = 1, overrides=(),

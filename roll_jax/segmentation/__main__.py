@@ -46,27 +46,6 @@ def parse_args(argv=None):
     return a
 
 
-def _parse_set(items: list[str]) -> dict:
-    """--set FIELD=VALUE pairs, each value converted to the field's type."""
-    import dataclasses
-
-    from configs.segmentation import SegmentationConfig
-
-    types = {f.name: type(f.default) for f in dataclasses.fields(SegmentationConfig)}
-    out = {}
-    for item in items:
-        name, sep, value = item.partition("=")
-        if not sep or name not in types:
-            raise ValueError(f"--set {item!r}: expected FIELD=VALUE with FIELD one of "
-                             f"{', '.join(types)}")
-        kind = types[name]
-        try:
-            out[name] = (value.lower() in ("1", "true", "yes")) if kind is bool else kind(value)
-        except ValueError:
-            raise ValueError(f"--set {item!r}: {value!r} is not a {kind.__name__}") from None
-    return out
-
-
 def main(argv=None) -> dict:
     a = parse_args(argv)
     import jax
@@ -74,7 +53,8 @@ def main(argv=None) -> dict:
     from tqdm import tqdm
 
     import envs_mjx
-    from configs.segmentation import segmentation_config
+    from configs.overrides import field_overrides
+    from configs.segmentation import SegmentationConfig, segmentation_config
     from roll_jax.segmentation import mog2, pipeline
 
     overrides = {k: v for k, v in {"eval_states": a.eval_states, "unet_epochs": a.unet_epochs,
@@ -84,7 +64,7 @@ def main(argv=None) -> dict:
                                         "label_background_ratio": a.label_background_ratio}.items()
                  if v is not None}
     try:
-        overrides.update(_parse_set(a.set))
+        overrides.update(field_overrides(SegmentationConfig, a.set))
         cfg = segmentation_config(a.task, a.preset, **overrides)
     except ValueError as e:
         sys.exit(f"error: {e}")
