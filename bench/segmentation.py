@@ -134,15 +134,23 @@ def parity_mog2(fit=2000, test=300, kinds=("mixed", "shadows", "flicker", "multi
         frames = mp.synthetic_video(kind, t=fit + test, h=H, w=W, c=c, seed=11)
         for shadows in (True, False):
             r = mp.compare(frames, lrs, history=fit, detect_shadows=shadows)
-            runs.append({"kind": kind, "channels": c, "detect_shadows": shadows,
-                         "frames": fit + test, "min": r.min, "mean": r.mean,
-                         "min_fit": float(r.agreement[:fit].min()),
-                         "min_lr0": float(r.agreement[fit:].min()),
-                         "frames_not_exact": int((r.agreement < 1).sum()),
-                         "background_image_equal": r.background_equal})
+            runs.append({"kind": kind, "channels": c, **_parity_row(r, fit, shadows)})
             print(f"parity {kind:12s} c={c} shadows={int(shadows)}: min {r.min:.6f} "
                   f"mean {r.mean:.6f} background {r.background_equal:.6f}", flush=True)
-    return {"frame_shape": [H, W], "history": fit, "fit_frames_lr_-1": fit,
+    return _parity_summary(runs, [H, W], fit, test)
+
+
+def _parity_row(r: mp.ParityResult, fit: int, shadows: bool) -> dict:
+    """One video's agreement figures: fit frames (lr -1) first, then the lr-0 frames."""
+    return {"detect_shadows": shadows, "frames": len(r.agreement), "min": r.min, "mean": r.mean,
+            "min_fit": float(r.agreement[:fit].min()),
+            "min_lr0": float(r.agreement[fit:].min()),
+            "frames_not_exact": int((r.agreement < 1).sum()),
+            "background_image_equal": r.background_equal}
+
+
+def _parity_summary(runs: list[dict], frame_shape, fit: int, test: int) -> dict:
+    return {"frame_shape": frame_shape, "history": fit, "fit_frames_lr_-1": fit,
             "test_frames_lr_0": test, "runs": runs,
             "min": min(r["min"] for r in runs), "mean": float(np.mean([r["mean"] for r in runs]))}
 
@@ -164,19 +172,12 @@ def parity_scenes(fit=2000, test=300, tasks=None) -> dict:
         frames = np.concatenate([empty, scene])
         for shadows in (True, False):
             r = mp.compare(frames, lrs, history=fit, detect_shadows=shadows)
-            runs.append({"task": task, "detect_shadows": shadows, "frames": fit + test,
-                         "min": r.min, "mean": r.mean,
-                         "min_fit": float(r.agreement[:fit].min()),
-                         "min_lr0": float(r.agreement[fit:].min()),
-                         "frames_not_exact": int((r.agreement < 1).sum()),
-                         "foreground_share_lr0": float((r.cv2_masks[fit:] > 0).mean()),
-                         "background_image_equal": r.background_equal})
+            runs.append({"task": task, **_parity_row(r, fit, shadows),
+                         "foreground_share_lr0": float((r.cv2_masks[fit:] > 0).mean())})
             print(f"parity {task:14s} shadows={int(shadows)}: min {r.min:.6f} mean {r.mean:.6f} "
                   f"not exact {runs[-1]['frames_not_exact']} background {r.background_equal:.6f}",
                   flush=True)
-    return {"frame_shape": [48, 48, 3], "history": fit, "fit_frames_lr_-1": fit,
-            "test_frames_lr_0": test, "runs": runs,
-            "min": min(r["min"] for r in runs), "mean": float(np.mean([r["mean"] for r in runs]))}
+    return _parity_summary(runs, [48, 48, 3], fit, test)
 
 
 def _rate(fn, *args, reps: int = 3) -> float:
