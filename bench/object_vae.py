@@ -33,17 +33,11 @@ N_IMAGES, N_TEST, STEPS_PER_CALL, EVAL_EVERY = 2000, 500, 50, 250
 
 
 def segmented_data(env, seg, seed: int, n: int):
-    s = env.spec
-
     @jax.jit
     def batch(keys):
         def one(k):
-            k_h, k_o = jax.random.split(k)
-            lo, hi = (jnp.asarray(v, jnp.float32) for v in (s.object_goal_low, s.object_goal_high))
-            pos = lo + (hi - lo) * jax.random.uniform(k_o, lo.shape)
-            h_lo, h_hi = (jnp.asarray(v, jnp.float32) for v in (s.hand_low, s.hand_high))
-            st = env.place(h_lo + (h_hi - h_lo) * jax.random.uniform(k_h, h_lo.shape), pos)
-            return env.render(st), pos
+            st = pipeline.random_placement(env, *jax.random.split(k))
+            return env.render(st), env.object_state(st)
 
         rgb, pos = jax.vmap(one)(keys)
         masks = pipeline.segment(seg, rgb)

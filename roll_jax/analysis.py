@@ -91,11 +91,6 @@ def spearman(x, y) -> float:
 
 # ============================================================================ helpers
 
-def _uniform(key, low, high):
-    low, high = jnp.asarray(low, jnp.float32), jnp.asarray(high, jnp.float32)
-    return low + (high - low) * jax.random.uniform(key, low.shape)
-
-
 def _batched(fn: Callable, x, chunk: int = 512):
     """fn over the leading axis of x in fixed-size chunks (the last one padded, so fn compiles
     at most once); returns a numpy array."""
@@ -128,7 +123,8 @@ def observation_set(env, key, n: int):
 
     Returns (obs_rgb uint8 [n, 48, 48, 3], goal_rgb uint8 [48, 48, 3], distances [n]) where
     distances = env.goal_distance(obs, goal) (metres, radians for the door)."""
-    s = env.spec
+    from roll_jax.segmentation.pipeline import random_placement
+
     k_goal, k_obs = jax.random.split(key)
 
     @jax.jit
@@ -136,9 +132,7 @@ def observation_set(env, key, n: int):
         goal = env.sample_goal(k_goal)
 
         def one(k):
-            k_h, k_o = jax.random.split(k)
-            st = env.place(_uniform(k_h, s.hand_low, s.hand_high),
-                           _uniform(k_o, s.object_goal_low, s.object_goal_high))
+            st = random_placement(env, *jax.random.split(k))
             return env.render(st), env.goal_distance(st, goal)
 
         rgb, dist = jax.vmap(one)(keys)

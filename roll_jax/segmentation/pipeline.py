@@ -48,6 +48,14 @@ def _uniform(key, low, high):
     return low + (high - low) * jax.random.uniform(key, low.shape)
 
 
+def random_placement(env, k_hand, k_object):
+    """A state at rest (kinematic `env.place`) with the hand uniform in its box and the object
+    uniform in its goal space."""
+    s = env.spec
+    return env.place(_uniform(k_hand, s.hand_low, s.hand_high),
+                     _uniform(k_object, s.object_goal_low, s.object_goal_high))
+
+
 def record_empty_scene(env, key, n_frames: int, n_envs: int, width: int = 48,
                        height: int = 48) -> jax.Array:
     """uint8[n_frames, H, W, 3] of the robot moving at random in the object-free scene.
@@ -190,12 +198,9 @@ def random_object_states(env, key, n: int, settle_steps: int = 5, chunk: int = 3
     State i depends only on `key` and i (not on `chunk`)."""
     from envs_mjx.rollout import random_actions, rollout
 
-    s = env.spec
-
     def one(k):
         k_h, k_o, k_a = jax.random.split(k, 3)
-        state = env.place(_uniform(k_h, s.hand_low, s.hand_high),
-                          _uniform(k_o, s.object_goal_low, s.object_goal_high))
+        state = random_placement(env, k_h, k_o)
         state, _ = rollout(env, state, random_actions(k_a, settle_steps, env.action_size))
         return env.render_both(state)
 
