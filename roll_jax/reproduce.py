@@ -198,10 +198,11 @@ def run_grid(cells: list[Cell], a, run_fn=None, pool=None) -> dict[str, str]:
             done[c.out] = "skipped"
         else:
             todo.append((c, tag, what))
-    jobs = getattr(a, "jobs", 1)
+    jobs = a.jobs
+    cache = os.path.join(os.path.abspath(a.out), ".jax_cache")
     if jobs <= 1:
         if run_fn is None:
-            _use_cache(os.path.join(os.path.abspath(a.out), ".jax_cache"))
+            _use_cache(cache)
             run_fn = train.run
         for c, tag, what in todo:
             print(f"{tag}: {'resuming' if what == 'resume' else 'starting'} in {c.out}", flush=True)
@@ -221,7 +222,6 @@ def run_grid(cells: list[Cell], a, run_fn=None, pool=None) -> dict[str, str]:
         pool = functools.partial(cf.ProcessPoolExecutor,
                                  mp_context=multiprocessing.get_context("spawn"))
     if run_fn is None:
-        cache = os.path.join(os.path.abspath(a.out), ".jax_cache")
         run_fn = functools.partial(_run_cell, cache=cache)
     else:
         run_fn = functools.partial(_call_run_fn, run_fn)
