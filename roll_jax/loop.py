@@ -4,7 +4,10 @@ A chunk, for one seed (the seed axis is a vmap over all of it):
   1. `episodes_per_epoch` x `horizon` steps of all envs in a `lax.scan`: scene-VAE encodes the
      rendered image, the policy acts (uniformly at random before learning starts), MJX steps,
      the renderer draws; exploration goals: ROLL from the object-VAE prior through the LSTM,
-     Skew-Fit from the skewed replay distribution (`fresh_goals`);
+     Skew-Fit from the skewed replay distribution (`fresh_goals`). The evaluation runs in the
+     same batch: `n_eval_goals` extra envs chase test goals with the deterministic policy
+     (the policy does not change during collection, so this evaluates the policy the chunk
+     starts from; one compiled env step serves both, see `collect_episode`);
   2. per finished episode: `segment` the frames, encode them (object-VAE, LSTM), store the
      whole trajectories with cached latents and Skew-Fit log p(x) in the replay buffer;
   3. 2 SAC updates per collected transition on HER-relabeled batches (rlkit's order: collect
@@ -46,6 +49,12 @@ class TrainState:
     # skewed sampling never runs the VAE; unfilled slots are ignored (buffer.size).
     skew_log_p: jax.Array
     env_state: Any  # EnvState batched over envs [E]
+    # [G = n_eval_goals] reset states the test envs start each episode from (through
+    # env.reset_episode, like the training envs: a fresh reset, or t = 0 for reset-free tasks)
+    test_start: Any
+    # The training metrics of the last chunk (`train_metric_keys`; zeros before the first):
+    # the next chunk reports them beside its evaluation of the policy they produced.
+    last_train: dict
     key: jax.Array
     env_steps: jax.Array  # int32, per seed
     epoch: jax.Array  # int32
@@ -59,6 +68,19 @@ class ChunkPlan:
     act_random: jax.Array  # bool: uniform random actions (before learning_starts)
     vae_batches: jax.Array  # int32: scene-VAE batches after collection (0 = none)
     lstm_batches: jax.Array  # int32: LSTM batches after collection (0 = none)
+
+
+def eval_only_plan() -> ChunkPlan:
+    """A chunk that learns nothing: run after the last epoch for the final evaluation."""
+    return ChunkPlan(learn=jnp.bool_(False), act_random=jnp.bool_(False),
+                     vae_batches=jnp.int32(0), lstm_batches=jnp.int32(0))
+
+
+def train_metric_keys(cfg: TrainConfig) -> tuple[str, ...]:
+    """The chunk's training metrics kept in TrainState.last_train (and written to metrics.csv)."""
+    keys = ("q_loss", "policy_loss", "alpha", "alpha_loss", "entropy", "q_mean", "reward",
+            "vae_loss", "rollout_latent_dist")
+    return keys + (("lstm_loss",) if goal_encoder(cfg).lstm else ())
 
 
 def plan_chunk(cfg: TrainConfig, epoch: int) -> ChunkPlan:
@@ -87,10 +109,13 @@ def init_state(key, cfg: TrainConfig, env, scene_vae: encoders.VAEState, lstm) -
     buffer = replay.init_buffer(cfg.sac.replay_capacity(cfg.horizon), cfg.horizon,
                                 cfg.scene.image_shape, env.action_size, cfg.scene.latent_dim,
                                 enc.goal_dim)
-    env_state = jax.vmap(env.reset)(jax.random.split(k_env, cfg.n_envs))
+    starts = jax.vmap(env.reset)(jax.random.split(k_env, cfg.n_envs + cfg.n_eval_goals))
     return TrainState(sac=sac_state, scene_vae=scene_vae, lstm=lstm, buffer=buffer,
                       skew_log_p=jnp.zeros(buffer.images.shape[:2], jnp.float32),
-                      env_state=env_state, key=k_run, env_steps=jnp.zeros((), jnp.int32),
+                      env_state=jax.tree.map(lambda x: x[:cfg.n_envs], starts),
+                      test_start=jax.tree.map(lambda x: x[cfg.n_envs:], starts),
+                      last_train={k: jnp.zeros((), jnp.float32) for k in train_metric_keys(cfg)},
+                      key=k_run, env_steps=jnp.zeros((), jnp.int32),
                       epoch=jnp.zeros((), jnp.int32))
 
 
@@ -100,43 +125,79 @@ def scene_latents(cfg: TrainConfig, params, images):
     return encoders.encode_mean(params, cfg.scene, images)
 
 
+def test_goals(cfg: TrainConfig, env, enc: GoalEncoder, frozen: Frozen, scene_params,
+               lstm_params, key):
+    """`n_eval_goals` test goals from the task's goal space: (goal env states, their goal
+    images rendered at 48x48, their latents: segmented and encoded like any goal image)."""
+    states = jax.vmap(env.sample_goal)(jax.random.split(key, cfg.n_eval_goals))
+    rgb = jax.vmap(env.render)(states)
+    latents = enc.single(lstm_params, enc.frame_latents(frozen, scene_params,
+                                                        enc.goal_images(frozen, rgb)))
+    return states, rgb, latents
+
+
+def _concat(a, b):
+    return jax.tree.map(lambda x, y: jnp.concatenate([x, y]), a, b)
+
+
 def collect_episode(cfg: TrainConfig, env, enc: GoalEncoder, frozen: Frozen, state: TrainState,
                     key, act_random):
-    """One episode of all E envs -> (env_state, replay.Trajectory [E, ...], Skew-Fit log p(x)
-    of its scene images [E, T+1], metrics)."""
-    k_reset, k_goal, k_act, k_lp = jax.random.split(key, 4)
+    """One episode of all E training envs and, in the same env batch, of G = n_eval_goals
+    test envs -> (env_state, replay.Trajectory [E, ...], Skew-Fit log p(x) of its scene
+    images [E, T+1], metrics incl. the test envs' final distances [G], a video of test env 0
+    [T+1, H, W, 3] and its goal image).
+
+    The test envs start from fresh resets, chase test goals (`test_goals`) with the
+    deterministic policy and are neither stored nor learned from. Sharing the batch costs G
+    more envs per step but no second compiled copy of MJX's step (the largest compile), and
+    one reset serves both."""
+    k_reset, k_goal, k_act, k_lp, k_test = jax.random.split(key, 5)
     lstm_params = None if state.lstm is None else state.lstm.params
-    env_state = jax.vmap(env.reset_episode)(state.env_state,
-                                            jax.random.split(k_reset, cfg.n_envs))
-    cdf = skew_cdf(state.skew_log_p, cfg.skew_alpha, state.buffer.size) if enc.skewed_goals else None
-    goals = fresh_goals(enc, state.buffer, cdf, lstm_params, k_goal, cfg.n_envs)
-    rgb0 = jax.vmap(env.render)(env_state)
     scene_params = state.scene_vae.params
+    n_train = cfg.n_envs
+    env_state = jax.vmap(env.reset_episode)(
+        _concat(state.env_state, state.test_start),
+        jax.random.split(k_reset, n_train + cfg.n_eval_goals))
+    test_states, test_rgb, test_lat = test_goals(cfg, env, enc, frozen, scene_params,
+                                                 lstm_params, k_test)
+    cdf = skew_cdf(state.skew_log_p, cfg.skew_alpha, state.buffer.size) if enc.skewed_goals else None
+    goals = jnp.concatenate([fresh_goals(enc, state.buffer, cdf, lstm_params, k_goal, n_train),
+                             test_lat])
+    is_test = (jnp.arange(goals.shape[0]) >= n_train)[:, None]
+    rgb0 = jax.vmap(env.render)(env_state)
 
     def step(carry, k):
         es, rgb = carry
         z = scene_latents(cfg, scene_params, rgb)
         k_pol, k_rand = jax.random.split(k)
         a_pol = sac.select_action(state.sac.policy_params, z, goals, k_pol)
+        a_det = sac.select_action(state.sac.policy_params, z, goals, None, deterministic=True)
         a_rand = jax.random.uniform(k_rand, a_pol.shape, minval=-1.0, maxval=1.0)
-        a = jnp.where(act_random, a_rand, a_pol)
+        a = jnp.where(is_test, a_det, jnp.where(act_random, a_rand, a_pol))
         es = jax.vmap(env.step)(es, a)
         rgb = jax.vmap(env.render)(es)
-        return (es, rgb), (rgb, a, z)
+        return (es, rgb), (rgb, a)
 
-    (env_state, _), (rgbs, actions, _) = jax.lax.scan(
+    (env_state, _), (rgbs, actions) = jax.lax.scan(
         step, (env_state, rgb0), jax.random.split(k_act, cfg.horizon))
-    images = jnp.concatenate([rgb0[None], rgbs], 0).swapaxes(0, 1)  # [E, T+1, H, W, 3]
+    all_images = jnp.concatenate([rgb0[None], rgbs], 0).swapaxes(0, 1)  # [E+G, T+1, H, W, 3]
+    images = all_images[:n_train]
+    test_final = jax.tree.map(lambda x: x[n_train:], env_state)
+    env_state = jax.tree.map(lambda x: x[:n_train], env_state)
+    goals = goals[:n_train]
     goal_imgs = enc.goal_images(frozen, images)
     frame_lat = enc.frame_latents(frozen, scene_params, goal_imgs)
     achieved = jax.vmap(lambda f: enc.sequence(lstm_params, f))(frame_lat)
     traj = replay.Trajectory(
-        images=images, object_images=goal_imgs, actions=actions.swapaxes(0, 1),
+        images=images, object_images=goal_imgs, actions=actions[:, :n_train].swapaxes(0, 1),
         obs_latents=scene_latents(cfg, scene_params, images), goal_latents=achieved,
         rollout_goals=goals)
     log_p = frame_log_p(cfg, scene_params, images, k_lp)
     final_dist = jnp.sum(jnp.square(achieved[:, -1] - goals), -1)
-    return env_state, traj, log_p, {"rollout_latent_dist": final_dist.mean()}
+    metrics = {"rollout_latent_dist": final_dist.mean(),
+               "test_distances": jax.vmap(env.goal_distance)(test_final, test_states),
+               "test_video": all_images[n_train], "test_goal_image": test_rgb[0]}
+    return env_state, traj, log_p, metrics
 
 
 def store_episodes(state: TrainState, traj: replay.Trajectory, log_p) -> TrainState:
@@ -309,8 +370,11 @@ def refresh(cfg: TrainConfig, enc: GoalEncoder, frozen: Frozen, state: TrainStat
 # ----------------------------------------------------------------------------- the chunk
 
 def make_chunk(cfg: TrainConfig, env):
-    """chunk(state, frozen, plan) -> (state, metrics) for ONE seed; the caller vmaps over seeds
-    (frozen and plan un-batched) and jits."""
+    """chunk(state, frozen, plan) -> (state, {"train": this chunk's training metrics, "eval":
+    the evaluation of the policy the chunk started from, with "train" = the metrics of the
+    chunk that trained it}) for ONE seed; the caller vmaps over seeds (frozen and plan
+    un-batched) and jits. The policy after the last chunk is evaluated by one more chunk
+    with `eval_only_plan()`."""
     enc = goal_encoder(cfg)
     n_updates = cfg.epoch_env_steps * cfg.sac.updates_per_step
 
@@ -324,8 +388,13 @@ def make_chunk(cfg: TrainConfig, env):
                 env_state=es, env_steps=s.env_steps + cfg.n_envs * cfg.horizon)
             return s, m
 
+        start_train = state.last_train
         state, col_m = jax.lax.scan(episode, state,
                                     jax.random.split(k_col, cfg.episodes_per_epoch))
+        dist = col_m.pop("test_distances").reshape(-1)  # [episodes * G]
+        evaluation = {"final_distance": dist.mean(), "final_distance_median": jnp.median(dist),
+                      "distances": dist, "video": col_m.pop("test_video")[0],
+                      "goal_image": col_m.pop("test_goal_image")[0], "train": start_train}
         metrics = jax.tree.map(jnp.mean, col_m)
 
         zero_sac = jax.tree.map(jnp.zeros_like, jax.eval_shape(
@@ -347,8 +416,9 @@ def make_chunk(cfg: TrainConfig, env):
             metrics.update(lstm_m)
         state = jax.lax.cond((plan.vae_batches > 0) | (plan.lstm_batches > 0),
                              lambda s: refresh(cfg, enc, frozen, s), lambda s: s, state)
-        state = state.replace(key=key, epoch=state.epoch + 1)
-        return state, metrics
+        state = state.replace(key=key, epoch=state.epoch + 1, last_train={
+            k: metrics[k].astype(jnp.float32) for k in train_metric_keys(cfg)})
+        return state, {"train": metrics, "eval": evaluation}
 
     return chunk
 
@@ -357,40 +427,3 @@ def compile_chunk(cfg: TrainConfig, env):
     """jit(vmap(chunk)) over seeds, state donated."""
     chunk = make_chunk(cfg, env)
     return jax.jit(jax.vmap(chunk, in_axes=(0, None, None)), donate_argnums=0)
-
-
-# ----------------------------------------------------------------------------- evaluation
-
-def make_evaluate(cfg: TrainConfig, env):
-    """evaluate(state, frozen, key) -> dict for ONE seed: `n_eval_goals` test goals sampled
-    from the task's goal space, rendered, segmented and encoded; the deterministic policy runs
-    one episode from a reset per goal; metric = the task's goal_distance at the final step."""
-    enc = goal_encoder(cfg)
-
-    def evaluate(state: TrainState, frozen: Frozen, key):
-        k_goal, k_reset = jax.random.split(key)
-        n = cfg.n_eval_goals
-        goal_states = jax.vmap(env.sample_goal)(jax.random.split(k_goal, n))
-        goal_rgb = jax.vmap(env.render)(goal_states)
-        lstm_params = None if state.lstm is None else state.lstm.params
-        scene_params = state.scene_vae.params
-        g_lat = enc.single(lstm_params, enc.frame_latents(
-            frozen, scene_params, enc.goal_images(frozen, goal_rgb)))
-        es = jax.vmap(env.reset)(jax.random.split(k_reset, n))
-
-        def step(es, _):
-            rgb = jax.vmap(env.render)(es)
-            z = scene_latents(cfg, scene_params, rgb)
-            a = sac.select_action(state.sac.policy_params, z, g_lat, None, deterministic=True)
-            es = jax.vmap(env.step)(es, a)
-            return es, rgb[0]
-
-        es, frames = jax.lax.scan(step, es, None, length=cfg.horizon)
-        final = jax.vmap(env.render)(es)[0]
-        dist = jax.vmap(env.goal_distance)(es, goal_states)
-        return {"final_distance": dist.mean(), "final_distance_median": jnp.median(dist),
-                    "distances": dist, "video": jnp.concatenate([frames, final[None]], 0),
-                    "goal_image": goal_rgb[0]}
-
-    return evaluate
-

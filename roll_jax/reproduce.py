@@ -45,6 +45,7 @@ LABELS = {"roll": "ROLL", "skewfit": "Skew-Fit", "roll_no_matching_loss": "ROLL,
 # Fields the grid sets itself; a --set of them would contradict it.
 GRID_FIELDS = ("task", "algo", "preset", "seeds", "matching_loss", "use_lstm", "use_object_vae")
 METRIC = "final_distance"
+DEFAULT_SEEDS = {"paper": 6, "smoke": 2}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -68,7 +69,9 @@ def parse_args(argv=None):
     p.add_argument("--algos", nargs="+", default=list(ALGOS), metavar="ALGO")
     p.add_argument("--ablations", action="store_true",
                    help=f"also ROLL without matching loss / LSTM / object-VAE on {ABLATION_TASK}")
-    p.add_argument("--seeds", type=int, default=6, help="seeds per run (vmapped), default 6")
+    p.add_argument("--seeds", type=int, default=None,
+                   help="seeds per run (vmapped); default 6 (the paper's) with --preset paper, "
+                        "2 with --preset smoke (a median and a band, at CPU cost)")
     p.add_argument("--seed", type=int, default=0, help="base PRNG seed of every run")
     p.add_argument("--devices", default="all", help="'all' or N: shard the seeds over devices")
     p.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE",
@@ -89,6 +92,8 @@ def parse_args(argv=None):
                     f"{', '.join(known)}")
         if len(set(given)) != len(given):
             p.error(f"{name} lists a value twice: {' '.join(given)}")
+    if a.seeds is None:
+        a.seeds = DEFAULT_SEEDS.get(a.preset, 6)
     if a.seeds < 1:
         p.error(f"--seeds must be >= 1, got {a.seeds}")
     if a.jobs < 1:
@@ -148,19 +153,28 @@ def _uses_segmentation(c: Cell) -> bool:
     return goal_encoder(c.cfg).segment
 
 
-def phases(cells: list[Cell]) -> tuple[list[Cell], list[Cell]]:
-    """Split for parallel jobs: a task's segmentation is fitted by the first of its cells that
-    uses it; the task's other segmenting cells wait for it (phase 2), so no two jobs fit (or
-    write) the same segmentation. Within phase 1 the fitting cells go first (the longest)."""
+def fit_dependencies(cells: list[Cell]) -> dict[str, list[Cell]]:
+    """For parallel jobs: a task's segmentation is fitted by the first of its cells that uses
+    it; the task's other segmenting cells wait for that cell, so no two jobs fit (or write)
+    the same segmentation. Returns cell dir -> the cells waiting for it (only fitters)."""
     fitter: dict[str, Cell] = {}
     for c in cells:
         if (_uses_segmentation(c) and c.task not in fitter
                 and not os.path.exists(os.path.join(seg_dir(c), "meta.json"))):
             fitter[c.task] = c
-    waits = [c for c in cells if _uses_segmentation(c) and c.task in fitter
-             and fitter[c.task] is not c]
-    first = list(fitter.values()) + [c for c in cells if c not in fitter.values() and c not in waits]
-    return first, waits
+    return {f.out: [c for c in cells if _uses_segmentation(c) and c.task == t and c is not f]
+            for t, f in fitter.items()}
+
+
+def schedule(cells: list[Cell]) -> tuple[list[Cell], dict[str, list[Cell]]]:
+    """(cells free to start, in start order; cell dir -> cells it releases). Fitters go first,
+    the one releasing the most cells first; a released cell starts next (ahead of the
+    queue), so the grid never waits at a barrier for one long cell."""
+    deps = fit_dependencies(cells)
+    waiting = {c.out for ws in deps.values() for c in ws}
+    fitters = sorted((c for c in cells if c.out in deps), key=lambda c: -len(deps[c.out]))
+    rest = [c for c in cells if c.out not in deps and c.out not in waiting]
+    return fitters + rest, deps
 
 
 def _use_cache(path: str) -> None:
@@ -187,7 +201,7 @@ def run_grid(cells: list[Cell], a, run_fn=None, pool=None) -> dict[str, str]:
     """Train every cell that is not finished; returns cell dir -> what happened.
 
     With a.jobs > 1 the cells run in that many worker processes (`pool`: an Executor factory
-    taking max_workers; spawned processes by default), in the two `phases`."""
+    taking max_workers; spawned processes by default) in the order of `schedule`."""
     done: dict[str, str] = {}
     todo = []
     for i, c in enumerate(cells):
@@ -226,24 +240,29 @@ def run_grid(cells: list[Cell], a, run_fn=None, pool=None) -> dict[str, str]:
     else:
         run_fn = functools.partial(_call_run_fn, run_fn)
     info = {c.out: (tag, what) for c, tag, what in todo}
-    first, waits = phases([c for c, _, _ in todo])
+    queue, releases = schedule([c for c, _, _ in todo])
     t_grid = time.time()
+
+    def submit(ex, c):
+        tag, what = info[c.out]
+        print(f"{tag}: starting ({'resume' if what == 'resume' else 'new'}), {c.out}", flush=True)
+        return ex.submit(run_fn, c.cfg, c.out, what == "resume", seg_dir(c), a.seed, a.devices)
+
     with pool(max_workers=jobs) as ex:
-        for phase in (first, waits):
-            futures = {}
-            for c in phase:
-                tag, what = info[c.out]
-                print(f"{tag}: queued ({'resume' if what == 'resume' else 'new'}) for "
-                      f"{jobs} jobs, {c.out}", flush=True)
-                futures[ex.submit(run_fn, c.cfg, c.out, what == "resume", seg_dir(c), a.seed,
-                                  a.devices)] = c
-            for fut in cf.as_completed(futures):
-                c = futures[fut]
+        running = {}
+        while queue or running:
+            while queue and len(running) < jobs:  # only `jobs` in flight: released cells can
+                c = queue.pop(0)                   # still jump the queue
+                running[submit(ex, c)] = c
+            finished, _ = cf.wait(running, return_when=cf.FIRST_COMPLETED)
+            for fut in finished:
+                c = running.pop(fut)
                 seconds = fut.result()  # a failed cell stops the grid (finished cells stay)
                 tag, what = info[c.out]
                 print(f"{tag}: done in {seconds:.0f} s (its own run time; grid at "
                       f"{time.time() - t_grid:.0f} s)", flush=True)
                 done[c.out] = "resumed" if what == "resume" else "ran"
+                queue[:0] = releases.get(c.out, [])
     return done
 
 

@@ -1,6 +1,7 @@
 """The training driver: segmentation -> pre-training -> chunks of the compiled loop.
 
-`run(cfg, out, ...)` is what `train.py` calls. Between chunks, Python evaluates, logs
+`run(cfg, out, ...)` is what `train.py` calls. Each chunk also evaluates the policy it starts
+from (test envs in the collection batch, `loop.collect_episode`); between chunks Python logs
 metrics.csv, checkpoints (orbax, the whole train state including the replay buffer), plots the
 learning curve and drives the progress bar. Seeds are the leading vmapped axis of the state;
 with several devices that axis is sharded over them (`roll_jax.sharding`). A finished run
@@ -25,8 +26,6 @@ from roll_jax import loop, pretrain
 from roll_jax import sharding as shd
 from roll_jax.agent import Frozen, goal_encoder
 
-METRIC_KEYS = ("q_loss", "policy_loss", "alpha", "alpha_loss", "entropy", "q_mean", "reward",
-               "vae_loss", "lstm_loss", "rollout_latent_dist")
 LOSS_KEYS = ("q_loss", "policy_loss", "alpha_loss", "vae_loss", "lstm_loss")
 COMPLETE_MARKER = "complete.json"
 
@@ -115,12 +114,19 @@ def setup(cfg: TrainConfig, env, key, out: str, seg_ckpt=None, enc_ckpt=None, pr
 
 def init_seeds(cfg: TrainConfig, env, key, pre: pretrain.Pretrained,
                sharding: shd.SeedSharding | None = None) -> loop.TrainState:
-    """[seeds]-batched train state; every seed starts from the same pre-trained encoders. With
-    a `sharding` each device builds its own seeds' state (nothing gathered on one device)."""
-    keys = jax.random.split(key, cfg.seeds)
+    """[seeds]-batched train state; every seed starts from the same pre-trained encoders."""
+    return init_states(cfg, env, jax.random.split(key, cfg.seeds), pre, sharding)
+
+
+def init_states(cfg: TrainConfig, env, keys, pre: pretrain.Pretrained,
+                sharding: shd.SeedSharding | None = None) -> loop.TrainState:
+    """One seed per key [S, 2]. With a `sharding` each device builds its own seeds' state
+    (nothing gathered on one device)."""
     init = jax.vmap(lambda k: loop.init_state(k, cfg, env, pre.scene_vae, pre.lstm))
     if sharding is None:
-        return jax.jit(init)(keys)
+        # Committed to the device like every chunk's output (the frozen params are), so the
+        # first chunk call compiles the same program as the later ones.
+        return jax.device_put(jax.jit(init)(keys), jax.devices()[0])
     return jax.jit(init, out_shardings=sharding.seeds)(sharding.shard(keys))
 
 
@@ -238,7 +244,7 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
 
     env = envs_mjx.make(cfg.task)
     key = jax.random.PRNGKey(seed)
-    k_setup, k_init, k_eval = jax.random.split(key, 3)
+    k_setup, k_init, _ = jax.random.split(key, 3)  # (the third key: evaluation, now in-chunk)
     frozen, pre = setup(cfg, env, k_setup, out, seg_ckpt, enc_ckpt, progress)
     state = init_seeds(cfg, env, k_init, pre, sharding)
     if sharding is not None:
@@ -257,11 +263,29 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
             state = sharding.shard(state)
         with open(csv_path) as f:
             rows = [{k: (float(v) if k not in ("seed",) else int(v)) for k, v in r.items()}
-                    for r in csv.DictReader(f) if float(r["env_steps"]) <= start_epoch * cfg.epoch_env_steps]
+                    for r in csv.DictReader(f) if float(r["env_steps"]) < start_epoch * cfg.epoch_env_steps]
     chunk = loop.compile_chunk(cfg, env)
-    evaluate = jax.jit(jax.vmap(loop.make_evaluate(cfg, env), in_axes=(0, None, 0)))
     if sharding is not None:
         chunk = sharding.wrap_chunk(chunk)
+
+    def log_evaluation(env_steps: int, ev: dict) -> None:
+        """One metrics.csv row per seed: the evaluation of the policy after `env_steps` and
+        the training metrics of the chunk that ended there (zeros at 0)."""
+        for s in range(cfg.seeds):
+            row = {"env_steps": env_steps, "seed": s,
+                   "final_distance": float(ev["final_distance"][s]),
+                   "final_distance_median": float(ev["final_distance_median"][s])}
+            row.update({k: float(v[s]) for k, v in ev["train"].items()})
+            rows.append(row)
+        if main:
+            write_gif(os.path.join(out, "videos", f"eval_{env_steps:08d}.gif"),
+                      ev["video"][0], ev["goal_image"][0])
+            with open(csv_path, "w", newline="") as f:
+                w = csv.DictWriter(f, fieldnames=list(rows[0]))
+                w.writeheader()
+                w.writerows(rows)
+            learning_curve(rows, os.path.join(out, "plots", "learning_curve.png"),
+                           f"{cfg.task} ({cfg.algo}, {cfg.seeds} seeds)")
 
     end_epoch = cfg.n_epochs if stop_after_epochs is None else min(cfg.n_epochs, stop_after_epochs)
     bar = tqdm(range(start_epoch, end_epoch), desc=f"{cfg.task} {cfg.algo}", unit="epoch",
@@ -273,37 +297,27 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
         metrics = shd.to_host(metrics)
         env_steps = (epoch + 1) * cfg.epoch_env_steps
         for k in LOSS_KEYS:
-            if k in metrics and not np.all(np.isfinite(metrics[k])):
-                bad = int(np.argmax(~np.isfinite(metrics[k])))
+            m = metrics["train"]
+            if k in m and not np.all(np.isfinite(m[k])):
+                bad = int(np.argmax(~np.isfinite(m[k])))
                 raise TrainingDiverged(
-                    f"{k} is {metrics[k][bad]} for seed {bad} at env step {env_steps} (epoch "
+                    f"{k} is {m[k][bad]} for seed {bad} at env step {env_steps} (epoch "
                     f"{epoch}); the last good checkpoint in {os.path.join(out, 'ckpt')} is kept")
+        if epoch % cfg.eval_every_epochs == 0:
+            log_evaluation(epoch * cfg.epoch_env_steps, metrics["eval"])
         if (epoch + 1) % cfg.eval_every_epochs == 0 or epoch + 1 == cfg.n_epochs:
-            eval_keys = jax.random.split(jax.random.fold_in(k_eval, epoch), cfg.seeds)
-            if sharding is not None:
-                eval_keys = sharding.shard(eval_keys)
-            ev = shd.to_host(evaluate(state, frozen, eval_keys))
-            for s in range(cfg.seeds):
-                row = {"env_steps": env_steps, "seed": s,
-                           "final_distance": float(ev["final_distance"][s]),
-                           "final_distance_median": float(ev["final_distance_median"][s])}
-                row.update({k: float(metrics[k][s]) for k in METRIC_KEYS if k in metrics})
-                rows.append(row)
-            if main:
-                write_gif(os.path.join(out, "videos", f"eval_{env_steps:08d}.gif"),
-                          ev["video"][0], ev["goal_image"][0])
-                with open(csv_path, "w", newline="") as f:
-                    w = csv.DictWriter(f, fieldnames=list(rows[0]))
-                    w.writeheader()
-                    w.writerows(rows)
-                learning_curve(rows, os.path.join(out, "plots", "learning_curve.png"),
-                               f"{cfg.task} ({cfg.algo}, {cfg.seeds} seeds)")
             _save(mgr, epoch + 1, state)
             now = time.perf_counter()
             rate = (env_steps - steps_last) * cfg.seeds / max(now - t_last, 1e-9)
             t_last, steps_last = now, env_steps
-            bar.set_postfix(dist=f"{np.median(ev['final_distance']):.3f}",
+            bar.set_postfix(dist=f"{np.median(metrics['eval']['final_distance']):.3f}",
                             sps=f"{rate:.0f}")
+    mgr.wait_until_finished()  # the state is donated below: the checkpoint must be on disk
+    if end_epoch == cfg.n_epochs:
+        # The final policy: one more chunk that only collects (and evaluates); its state is
+        # dropped, the checkpoint above is the run's end.
+        _, metrics = chunk(state, frozen, loop.eval_only_plan())
+        log_evaluation(cfg.total_env_steps, shd.to_host(metrics)["eval"])
     mgr.wait_until_finished()
     mgr.close()
     if main and end_epoch == cfg.n_epochs:

@@ -239,3 +239,18 @@ def test_parallel_jobs_fit_each_segmentation_once_before_its_other_cells(tmp_pat
     assert (out / "results.md").stat().st_size > 0
     with pytest.raises(SystemExit):
         reproduce.main(_args(out, "--jobs", "0"), run_fn=FakeRun())
+
+
+def test_schedule_starts_the_fitter_that_releases_most_cells_first(tmp_path):
+    a, _ = reproduce.parse_args(_args(tmp_path / "grid", "--tasks", "puck_push", "hurdle_top",
+                                      "--ablations", "--seeds", "2"))
+    start, releases = reproduce.schedule(reproduce.plan(a))
+    names = [os.path.basename(c.out) for c in start]
+    # hurdle_top's ROLL run fits the segmentation two ablations wait for: it goes first.
+    assert names == ["hurdle_top__roll", "puck_push__roll", "puck_push__skewfit",
+                     "hurdle_top__skewfit", "hurdle_top__roll_no_object_vae"]
+    released = {os.path.basename(k): sorted(os.path.basename(c.out) for c in v)
+                for k, v in releases.items()}
+    assert released == {"hurdle_top__roll": ["hurdle_top__roll_no_lstm",
+                                             "hurdle_top__roll_no_matching_loss"],
+                        "puck_push__roll": []}

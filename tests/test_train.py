@@ -41,20 +41,24 @@ def _csv(path):
 
 
 def test_writes_all_outputs(runs):
-    cfg, full, _rows, *_ = runs
+    _cfg, full, _rows, *_ = runs
     for name in ("config.json", "metrics.csv", "plots/learning_curve.png",
-                 "videos/eval_00000500.gif", "videos/eval_00001000.gif",
+                 "videos/eval_00000000.gif", "videos/eval_00000500.gif",
+                 "videos/eval_00001000.gif",
                  "segmentation/meta.json", "encoders/meta.json"):
         assert os.path.exists(os.path.join(full, name)), name
     assert sorted(os.listdir(os.path.join(full, "ckpt")))  # orbax steps
     table = _csv(os.path.join(full, "metrics.csv"))
-    assert len(table) == 2 * cfg.seeds  # one row per seed per evaluation
+    # One row per seed per evaluation: the initial policy, after each of the 2 chunks.
+    assert [int(r["env_steps"]) for r in table] == [0, 0, 500, 500, 1000, 1000]
     for r in table:
         assert np.isfinite(float(r["final_distance"])) and 0 <= float(r["final_distance"]) < 1
         for k in ("q_loss", "alpha", "vae_loss", "lstm_loss"):
             assert np.isfinite(float(r[k])), k
-    # Learning started (learning_starts 200 < 500 steps): SAC losses are not the zero filler.
-    assert all(float(r["q_loss"]) > 0 for r in table)
+    # Losses are those of the chunk that ended at env_steps: none before any training; then
+    # learning started (learning_starts 200 < 500 steps), so not the zero filler.
+    assert all(float(r["q_loss"]) == 0 for r in table[:2])
+    assert all(float(r["q_loss"]) > 0 for r in table[2:])
 
 
 def test_chunk_traced_once(runs):
@@ -94,10 +98,9 @@ def test_equal_keys_give_equal_seeds(runs):
     env = envs_mjx.make(cfg.task)
     frozen, pre = train.setup(cfg, env, jax.random.PRNGKey(0), full, progress=False)
     key = jax.random.PRNGKey(7)
-    # Built as train.init_seeds builds it (one jit), so the chunk's input types are the run's
-    # and its compiled program comes from the persistent cache instead of a second compile.
-    state = jax.jit(jax.vmap(lambda k: loop.init_state(k, cfg, env, pre.scene_vae, pre.lstm)))(
-        jax.numpy.stack([key, key]))
+    # Built as train.init_seeds builds it, so the chunk's input types are the run's and its
+    # compiled program comes from the persistent cache instead of a second compile.
+    state = train.init_states(cfg, env, jax.numpy.stack([key, key]), pre)
     state, m = loop.compile_chunk(cfg, env)(state, frozen, loop.plan_chunk(cfg, 0))
     for leaf in jax.tree.leaves((state.sac, m)):
         np.testing.assert_array_equal(np.asarray(leaf[0]), np.asarray(leaf[1]))
