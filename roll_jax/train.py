@@ -261,9 +261,13 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
         start_epoch, state = _restore(mgr, abstract)
         if sharding is not None:
             state = sharding.shard(state)
+        # Rows of the chunks before the checkpoint; a finished run's final evaluation too.
+        keep = start_epoch * cfg.epoch_env_steps
         with open(csv_path) as f:
             rows = [{k: (float(v) if k not in ("seed",) else int(v)) for k, v in r.items()}
-                    for r in csv.DictReader(f) if float(r["env_steps"]) < start_epoch * cfg.epoch_env_steps]
+                    for r in csv.DictReader(f)
+                    if float(r["env_steps"]) < keep or (start_epoch == cfg.n_epochs
+                                                        and float(r["env_steps"]) == keep)]
     chunk = loop.compile_chunk(cfg, env)
     if sharding is not None:
         chunk = sharding.wrap_chunk(chunk)
@@ -313,7 +317,8 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
             bar.set_postfix(dist=f"{np.median(metrics['eval']['final_distance']):.3f}",
                             sps=f"{rate:.0f}")
     mgr.wait_until_finished()  # the state is donated below: the checkpoint must be on disk
-    if end_epoch == cfg.n_epochs:
+    evaluated = any(r["env_steps"] == cfg.total_env_steps for r in rows)  # resumed, finished
+    if end_epoch == cfg.n_epochs and not evaluated:
         # The final policy: one more chunk that only collects (and evaluates); its state is
         # dropped, the checkpoint above is the run's end.
         _, metrics = chunk(state, frozen, loop.eval_only_plan())
