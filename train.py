@@ -74,6 +74,9 @@ def parse_args(argv=None):
     p.add_argument("--devices", default="all",
                    help="'all' or N: shard the seed axis over that many devices (seeds must be "
                         "divisible by it; 1 = unsharded)")
+    p.add_argument("--seed-batch", default="auto",
+                   help="'auto' or N: seeds vmapped side by side per device, the rest run one "
+                        "group after the other (auto: 1 on CPU, all on GPU/TPU)")
     a = p.parse_args(argv)
     if a.task not in envs_mjx.TASK_NAMES:
         p.error(f"unknown --task {a.task!r}; expected one of {', '.join(envs_mjx.TASK_NAMES)}")
@@ -96,7 +99,8 @@ def parse_args(argv=None):
     from roll_jax import sharding
 
     try:
-        sharding.resolve(a.devices, cfg.seeds)
+        devs = sharding.resolve(a.devices, cfg.seeds)
+        sharding.resolve_seed_batch(a.seed_batch, cfg.seeds, len(devs))
     except ValueError as e:
         p.error(str(e))
     if a.resume:
@@ -185,7 +189,7 @@ def main(argv=None) -> int:
 
     t0 = time.time()
     rows = train.run(cfg, out, resume=a.resume, seg_ckpt=a.seg_ckpt, enc_ckpt=a.enc_ckpt,
-                     seed=a.seed, devices=a.devices)
+                     seed=a.seed, devices=a.devices, seed_batch=a.seed_batch)
     last = [r for r in rows if r["env_steps"] == rows[-1]["env_steps"]]
     print(json.dumps({"out": out, "env_steps": rows[-1]["env_steps"], "seeds": cfg.seeds,
                       "final_distance_per_seed": [r["final_distance"] for r in last],

@@ -1,7 +1,7 @@
 """Training-loop benchmark: env steps/s of the compiled ROLL chunk and where its time goes.
 
-1. The whole chunk: `loop.compile_chunk` (jit of the seed-vmapped `loop.make_chunk`, state
-   donated: the code path `train.py` runs) for each --seeds count, lowered and compiled ahead
+1. The whole chunk: `loop.compile_chunk` (jit of `loop.make_chunk` over the seeds, vmapped or,
+   with --seed-batch (auto: 1 on CPU), mapped; state donated: the code path `train.py` runs) for each --seeds count, lowered and compiled ahead
    of time (compile time reported apart), then --chunks chunks; the first is a warm-up, the
    second onwards are timed (steady state). env steps/s = seeds x epoch_env_steps / chunk time.
 2. Its parts, each its own jitted function over the same seeds and at the sizes one chunk uses,
@@ -58,7 +58,7 @@ import jax.numpy as jnp
 
 import envs_mjx
 from configs.train import make_config
-from roll_jax import encoders, loop, sac
+from roll_jax import encoders, loop, sac, sharding
 from roll_jax.agent import Frozen, goal_encoder
 from roll_jax.segmentation import mog2, pipeline, unet
 
@@ -284,7 +284,8 @@ def bench_seeds(a, seeds: int, env) -> dict:
           f"{n_updates} SAC updates per seed at batch {cfg.sac.batch_size}", flush=True)
 
     # 1. the chunk, exactly as train.run builds it
-    chunk = loop.compile_chunk(cfg, env)
+    seed_batch = sharding.resolve_seed_batch(a.seed_batch, seeds)
+    chunk = loop.compile_chunk(cfg, env, 1, seed_batch)
     compiled, lower_s, compile_s = _compile(chunk, state, frozen, plan)
     print(f"  chunk     compile {compile_s:6.1f} s (trace+lower {lower_s:5.1f} s)", flush=True)
     times, cpus = [], []
@@ -296,7 +297,7 @@ def bench_seeds(a, seeds: int, env) -> dict:
               f"{'  (warm-up, not in steady state)' if i == 0 else ''}", flush=True)
     finite = bool(all(jnp.all(jnp.isfinite(x)) for x in jax.tree.leaves(metrics)))
     steady = times[1:]
-    chunk_res = {"lower_s": lower_s, "compile_s": compile_s, "first_chunk_s": times[0],
+    chunk_res = {"seed_batch": seed_batch, "lower_s": lower_s, "compile_s": compile_s, "first_chunk_s": times[0],
                  "steady_chunk_times_s": steady, "steady_chunk_median_s": statistics.median(steady),
                  "steady_chunk_min_s": min(steady), "steady_chunk_cpu_times_s": cpus[1:],
                  "steady_chunk_cpu_median_s": statistics.median(cpus[1:]),
@@ -429,6 +430,9 @@ def main(argv=None):
                    help="online LSTM batches per chunk (0: steady state without)")
     p.add_argument("--no-collect", dest="collect", action="store_false",
                    help="skip timing the collection phase as one function (saves its compile)")
+    p.add_argument("--seed-batch", default="auto",
+                   help="seeds vmapped together in the chunk, the rest mapped (as train.py; "
+                        "auto: 1 on CPU, all on GPU)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", default=RESULTS)
     a = p.parse_args(argv)

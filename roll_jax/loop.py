@@ -1,6 +1,6 @@
 """One compiled training chunk (an rlkit "epoch"): collect, store, learn; Algorithm 1.
 
-A chunk, for one seed (the seed axis is a vmap over all of it):
+A chunk, for one seed (the caller runs it over the seed axis, `sharding.over_seeds`):
   1. `episodes_per_epoch` x `horizon` steps of all envs in a `lax.scan`: scene-VAE encodes the
      rendered image, the policy acts (uniformly at random before learning starts), MJX steps,
      the renderer draws; exploration goals: ROLL from the object-VAE prior through the LSTM,
@@ -372,8 +372,8 @@ def refresh(cfg: TrainConfig, enc: GoalEncoder, frozen: Frozen, state: TrainStat
 def make_chunk(cfg: TrainConfig, env):
     """chunk(state, frozen, plan) -> (state, {"train": this chunk's training metrics, "eval":
     the evaluation of the policy the chunk started from, with "train" = the metrics of the
-    chunk that trained it}) for ONE seed; the caller vmaps over seeds (frozen and plan
-    un-batched) and jits. The policy after the last chunk is evaluated by one more chunk
+    chunk that trained it}) for ONE seed; the caller runs it over the seeds (frozen and plan
+    un-batched; `compile_chunk`) and jits. The policy after the last chunk is evaluated by one more chunk
     with `eval_only_plan()`."""
     enc = goal_encoder(cfg)
     n_updates = cfg.epoch_env_steps * cfg.sac.updates_per_step
@@ -423,7 +423,11 @@ def make_chunk(cfg: TrainConfig, env):
     return chunk
 
 
-def compile_chunk(cfg: TrainConfig, env):
-    """jit(vmap(chunk)) over seeds, state donated."""
-    chunk = make_chunk(cfg, env)
-    return jax.jit(jax.vmap(chunk, in_axes=(0, None, None)), donate_argnums=0)
+def compile_chunk(cfg: TrainConfig, env, n_devices: int = 1, seed_batch: int | None = None):
+    """jit of the chunk over the seed axis, state donated: vmapped over all seeds
+    (`seed_batch` None), or each device's seeds in a lax.map over groups of `seed_batch`
+    vmapped seeds (`sharding.over_seeds`; faster on a CPU)."""
+    from roll_jax.sharding import over_seeds
+
+    chunk = over_seeds(make_chunk(cfg, env), cfg.seeds, n_devices, seed_batch)
+    return jax.jit(chunk, donate_argnums=0)

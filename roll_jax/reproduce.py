@@ -12,7 +12,8 @@ over --devices). A run with the completion marker is skipped (never rerun, never
 overwritten); an incomplete one is resumed from its last checkpoint. Every cell's config is
 built, and checked against what DIR already holds, before anything runs. The segmentation is
 fitted once per task (DIR/segmentation/TASK, shared by the task's ROLL runs: same seed, same
-config, so the same fit). Then DIR/figure4.png, DIR/ablations.png (with --ablations),
+config, so the same fit); pre-training datasets and models are shared the same way
+(DIR/pretrain, keyed by what they were built from). Then DIR/figure4.png, DIR/ablations.png (with --ablations),
 DIR/results.md and DIR/results.csv are drawn from the runs' metrics.csv files.
 """
 
@@ -74,6 +75,8 @@ def parse_args(argv=None):
                         "2 with --preset smoke (a median and a band, at CPU cost)")
     p.add_argument("--seed", type=int, default=0, help="base PRNG seed of every run")
     p.add_argument("--devices", default="all", help="'all' or N: shard the seeds over devices")
+    p.add_argument("--seed-batch", default="auto",
+                   help="'auto' or N: seeds vmapped side by side per device (as train.py)")
     p.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE",
                    help="config overrides for every run (as train.py --set)")
     p.add_argument("--jobs", type=int, default=1,
@@ -147,6 +150,13 @@ def seg_dir(c: Cell) -> str:
     return os.path.join(os.path.dirname(os.path.dirname(c.out)), "segmentation", c.task)
 
 
+def pretrain_dir(run_out: str) -> str:
+    """DIR/pretrain: pre-training datasets and models the grid's runs share (content-keyed,
+    `pretrain.pretrain(cache=...)`): a task's Skew-Fit and ablation runs reuse the scene data
+    and scene-VAE its ROLL run trained when their configs match."""
+    return os.path.join(os.path.dirname(os.path.dirname(run_out)), "pretrain")
+
+
 def _uses_segmentation(c: Cell) -> bool:
     from roll_jax.agent import goal_encoder
 
@@ -166,14 +176,25 @@ def fit_dependencies(cells: list[Cell]) -> dict[str, list[Cell]]:
             for t, f in fitter.items()}
 
 
+def _models_pretrained(c: Cell) -> int:
+    """How many encoders a cell pre-trains (scene-VAE, object-VAE, LSTM): its size, roughly."""
+    from roll_jax.agent import goal_encoder
+
+    enc = goal_encoder(c.cfg)
+    return 1 + (enc.object_cfg is not None) + bool(enc.lstm)
+
+
 def schedule(cells: list[Cell]) -> tuple[list[Cell], dict[str, list[Cell]]]:
     """(cells free to start, in start order; cell dir -> cells it releases). Fitters go first,
     the one releasing the most cells first; a released cell starts next (ahead of the
-    queue), so the grid never waits at a barrier for one long cell."""
+    queue), so the grid never waits at a barrier for one long cell. The other cells follow
+    the largest first (more encoders to pre-train), so no long cell is left to run alone at
+    the end."""
     deps = fit_dependencies(cells)
     waiting = {c.out for ws in deps.values() for c in ws}
     fitters = sorted((c for c in cells if c.out in deps), key=lambda c: -len(deps[c.out]))
-    rest = [c for c in cells if c.out not in deps and c.out not in waiting]
+    rest = sorted((c for c in cells if c.out not in deps and c.out not in waiting),
+                  key=lambda c: -_models_pretrained(c))
     return fitters + rest, deps
 
 
@@ -186,14 +207,15 @@ def _use_cache(path: str) -> None:
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
 
 
-def _run_cell(cfg, out: str, resume: bool, seg_ckpt: str, seed: int, devices, cache: str):
+def _run_cell(cfg, out: str, resume: bool, seg_ckpt: str, seed: int, devices, seed_batch,
+              cache: str):
     """One cell in a worker process (spawned: a fresh JAX), sharing the compilation cache."""
     _use_cache(cache)
     from roll_jax import train as train_mod
 
     t0 = time.time()
     train_mod.run(cfg, out, resume=resume, seg_ckpt=seg_ckpt, seed=seed, devices=devices,
-                  progress=False)
+                  seed_batch=seed_batch, pretrain_cache=pretrain_dir(out), progress=False)
     return time.time() - t0
 
 
@@ -222,7 +244,8 @@ def run_grid(cells: list[Cell], a, run_fn=None, pool=None) -> dict[str, str]:
             print(f"{tag}: {'resuming' if what == 'resume' else 'starting'} in {c.out}", flush=True)
             t0 = time.time()
             run_fn(c.cfg, c.out, resume=what == "resume", seg_ckpt=seg_dir(c), seed=a.seed,
-                   devices=a.devices, progress=True)
+                   devices=a.devices, seed_batch=a.seed_batch, pretrain_cache=pretrain_dir(c.out),
+                   progress=True)
             print(f"{tag}: done in {time.time() - t0:.0f} s", flush=True)
             done[c.out] = "resumed" if what == "resume" else "ran"
         return done
@@ -246,7 +269,8 @@ def run_grid(cells: list[Cell], a, run_fn=None, pool=None) -> dict[str, str]:
     def submit(ex, c):
         tag, what = info[c.out]
         print(f"{tag}: starting ({'resume' if what == 'resume' else 'new'}), {c.out}", flush=True)
-        return ex.submit(run_fn, c.cfg, c.out, what == "resume", seg_dir(c), a.seed, a.devices)
+        return ex.submit(run_fn, c.cfg, c.out, what == "resume", seg_dir(c), a.seed, a.devices,
+                         a.seed_batch)
 
     with pool(max_workers=jobs) as ex:
         running = {}
@@ -266,10 +290,10 @@ def run_grid(cells: list[Cell], a, run_fn=None, pool=None) -> dict[str, str]:
     return done
 
 
-def _call_run_fn(run_fn, cfg, out, resume, seg_ckpt, seed, devices):
+def _call_run_fn(run_fn, cfg, out, resume, seg_ckpt, seed, devices, seed_batch):
     t0 = time.time()
     run_fn(cfg, out, resume=resume, seg_ckpt=seg_ckpt, seed=seed, devices=devices,
-           progress=False)
+           seed_batch=seed_batch, pretrain_cache=pretrain_dir(out), progress=False)
     return time.time() - t0
 
 
@@ -382,7 +406,8 @@ def main(argv=None, run_fn=None, pool=None) -> int:
         if not (a.report_only or a.dry_run):
             from roll_jax import sharding
 
-            sharding.resolve(a.devices, a.seeds)
+            devs = sharding.resolve(a.devices, a.seeds)
+            sharding.resolve_seed_batch(a.seed_batch, a.seeds, len(devs))
     except (ValueError, TypeError) as e:
         p.error(str(e))
     if a.dry_run:

@@ -3,13 +3,15 @@
 `run(cfg, out, ...)` is what `train.py` calls. Each chunk also evaluates the policy it starts
 from (test envs in the collection batch, `loop.collect_episode`); between chunks Python logs
 metrics.csv, checkpoints (orbax, the whole train state including the replay buffer), plots the
-learning curve and drives the progress bar. Seeds are the leading vmapped axis of the state;
-with several devices that axis is sharded over them (`roll_jax.sharding`). A finished run
-gets `COMPLETE_MARKER` (complete.json), written atomically last.
+learning curve and drives the progress bar; at the end it writes timings.json (wall and CPU
+seconds per phase; the first chunk's include its compile). Seeds are the state's leading axis, vmapped
+or mapped (`roll_jax.sharding.over_seeds`); with several devices that axis is sharded over
+them. A finished run gets `COMPLETE_MARKER` (complete.json), written atomically last.
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
 import json
@@ -46,6 +48,27 @@ def _write_atomic(path: str, text: str) -> None:
 
 class TrainingDiverged(RuntimeError):
     pass
+
+
+class PhaseTimes:
+    """Wall and process-CPU seconds (all threads) per phase of a run, for timings.json;
+    `with times("name"):` adds one entry to the phase's list."""
+
+    def __init__(self):
+        self.wall: dict[str, list[float]] = {}
+        self.cpu: dict[str, list[float]] = {}
+
+    @contextlib.contextmanager
+    def __call__(self, name: str):
+        w, c = time.perf_counter(), time.process_time()
+        try:
+            yield
+        finally:
+            self.wall.setdefault(name, []).append(round(time.perf_counter() - w, 2))
+            self.cpu.setdefault(name, []).append(round(time.process_time() - c, 2))
+
+    def as_dict(self) -> dict:
+        return {"wall_s": self.wall, "cpu_s": self.cpu}
 
 
 def _config_json(cfg: TrainConfig) -> dict:
@@ -94,20 +117,27 @@ def check_resume(out: str, cfg: TrainConfig) -> None:
                          f"saved {saved.get(k)!r}, now {now.get(k)!r}")
 
 
-def setup(cfg: TrainConfig, env, key, out: str, seg_ckpt=None, enc_ckpt=None, progress=True):
-    """Segmentation and encoders (fitted, or loaded from the given/previous checkpoints)."""
+def setup(cfg: TrainConfig, env, key, out: str, seg_ckpt=None, enc_ckpt=None, progress=True,
+          times: PhaseTimes | None = None, pretrain_cache: str | None = None):
+    """Segmentation and encoders (fitted, or loaded from the given/previous checkpoints;
+    `pretrain_cache`: datasets and models shared with other runs, `pretrain.pretrain`);
+    their times go to `times` (phases "segmentation" and "pretrain")."""
+    times = PhaseTimes() if times is None else times
     enc = goal_encoder(cfg)
     k_seg, k_pre = jax.random.split(key)
     seg = None
-    if enc.segment:
-        seg = pretrain.fit_or_load_segmentation(cfg, env, seg_ckpt or os.path.join(out, "segmentation"),
-                                                k_seg)
+    with times("segmentation"):
+        if enc.segment:
+            seg = pretrain.fit_or_load_segmentation(
+                cfg, env, seg_ckpt or os.path.join(out, "segmentation"), k_seg)
     enc_path = enc_ckpt or os.path.join(out, "encoders")
-    if os.path.exists(os.path.join(enc_path, "meta.json")):
-        pre = pretrain.load(enc_path, cfg)
-    else:
-        pre, _ = pretrain.pretrain(cfg, env, seg, k_pre, progress=progress)
-        pretrain.save(enc_path, cfg, pre)
+    with times("pretrain"):
+        if os.path.exists(os.path.join(enc_path, "meta.json")):
+            pre = pretrain.load(enc_path, cfg)
+        else:
+            pre, _ = pretrain.pretrain(cfg, env, seg, k_pre, progress=progress,
+                                       cache=pretrain_cache)
+            pretrain.save(enc_path, cfg, pre)
     frozen = Frozen(seg=seg, object_vae=None if pre.object_vae is None else pre.object_vae.params)
     return frozen, pre
 
@@ -221,10 +251,14 @@ def learning_curve(rows: list[dict], path: str, title: str) -> None:
 
 def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None = None,
         enc_ckpt: str | None = None, seed: int = 0, progress: bool = True,
-        stop_after_epochs: int | None = None, devices="all") -> list[dict]:
+        stop_after_epochs: int | None = None, devices="all", seed_batch="auto",
+        pretrain_cache: str | None = None) -> list[dict]:
     """Train `cfg.seeds` seeds; returns the metrics rows. `stop_after_epochs` ends early (as an
     interruption would; tests use it for resume). `devices` ('all' or N) shards the seed axis
-    over that many devices (seeds must divide evenly); one device is the unsharded path."""
+    over that many devices (seeds must divide evenly); one device is the unsharded path.
+    `seed_batch` ('auto' or N): seeds vmapped together per device, the rest mapped
+    (`sharding.resolve_seed_batch`). `pretrain_cache`: a directory of pre-training datasets
+    and models shared between runs (the reproduction grid's)."""
     from tqdm import tqdm
 
     import envs_mjx
@@ -232,6 +266,8 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
     if resume:
         check_resume(out, cfg)
     sharding = shd.make(devices, cfg.seeds)  # the divisibility error comes before any compile
+    n_devices = 1 if sharding is None else sharding.n_devices
+    per_device = shd.resolve_seed_batch(seed_batch, cfg.seeds, n_devices)
     main = shd.is_main_process()
     if main:
         os.makedirs(os.path.join(out, "plots"), exist_ok=True)
@@ -242,11 +278,15 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
         with open(os.path.join(out, "config.json"), "w") as f:
             json.dump(_config_json(cfg), f, indent=2)
 
+    times = PhaseTimes()  # this process's phases -> timings.json
+    t_run, c_run = time.perf_counter(), time.process_time()
     env = envs_mjx.make(cfg.task)
     key = jax.random.PRNGKey(seed)
     k_setup, k_init, _ = jax.random.split(key, 3)  # (the third key: evaluation, now in-chunk)
-    frozen, pre = setup(cfg, env, k_setup, out, seg_ckpt, enc_ckpt, progress)
-    state = init_seeds(cfg, env, k_init, pre, sharding)
+    frozen, pre = setup(cfg, env, k_setup, out, seg_ckpt, enc_ckpt, progress, times,
+                        pretrain_cache)
+    with times("init"):
+        state = jax.block_until_ready(init_seeds(cfg, env, k_init, pre, sharding))
     if sharding is not None:
         frozen = sharding.replicate(frozen)
     mgr = _manager(out, cfg)
@@ -268,7 +308,7 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
                     for r in csv.DictReader(f)
                     if float(r["env_steps"]) < keep or (start_epoch == cfg.n_epochs
                                                         and float(r["env_steps"]) == keep)]
-    chunk = loop.compile_chunk(cfg, env)
+    chunk = loop.compile_chunk(cfg, env, n_devices, per_device)
     if sharding is not None:
         chunk = sharding.wrap_chunk(chunk)
 
@@ -297,8 +337,9 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
     t_last, steps_last = time.perf_counter(), start_epoch * cfg.epoch_env_steps
     for epoch in bar:
         plan = loop.plan_chunk(cfg, epoch)
-        state, metrics = chunk(state, frozen, plan)
-        metrics = shd.to_host(metrics)
+        with times("chunks"):  # the first one includes tracing and compiling the chunk
+            state, metrics = chunk(state, frozen, plan)
+            metrics = shd.to_host(metrics)
         env_steps = (epoch + 1) * cfg.epoch_env_steps
         for k in LOSS_KEYS:
             m = metrics["train"]
@@ -321,13 +362,19 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
     if end_epoch == cfg.n_epochs and not evaluated:
         # The final policy: one more chunk that only collects (and evaluates); its state is
         # dropped, the checkpoint above is the run's end.
-        _, metrics = chunk(state, frozen, loop.eval_only_plan())
-        log_evaluation(cfg.total_env_steps, shd.to_host(metrics)["eval"])
+        with times("final_eval"):
+            _, metrics = chunk(state, frozen, loop.eval_only_plan())
+            metrics = shd.to_host(metrics)
+        log_evaluation(cfg.total_env_steps, metrics["eval"])
     mgr.wait_until_finished()
     mgr.close()
+    if main:
+        with open(os.path.join(out, "timings.json"), "w") as f:
+            json.dump({**times.as_dict(), "total_wall_s": round(time.perf_counter() - t_run, 2),
+                       "total_cpu_s": round(time.process_time() - c_run, 2)}, f, indent=2)
     if main and end_epoch == cfg.n_epochs:
         _write_atomic(os.path.join(out, COMPLETE_MARKER), json.dumps(
             {"env_steps": cfg.total_env_steps, "seeds": cfg.seeds, "task": cfg.task,
-             "algo": cfg.algo, "devices": 1 if sharding is None else sharding.n_devices},
+             "algo": cfg.algo, "devices": n_devices, "seed_batch": per_device},
             indent=2))
     return rows
