@@ -17,6 +17,8 @@ appendix "Training schedules").
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import hashlib
 import json
 import os
 import sys
@@ -59,8 +61,10 @@ def scene_dataset(env, key, n_images: int) -> jax.Array:
 
 def object_dataset(env, seg_params, key, n_images: int):
     """(segmented images uint8 [n, 48, 48, 3], object masks bool [n, 48, 48]) of random object
-    placements, masks from `segment`."""
-    rgb, _ = pipeline.random_object_states(env, key, n_images)
+    placements, masks from `segment`. The placements are taken as placed (like the goal
+    images `env.sample_goal` gives), not settled by a few physics steps: that keeps MJX's step,
+    the slowest program to compile, out of this one."""
+    rgb, _ = pipeline.random_object_states(env, key, n_images, settle_steps=0)
     masks = jax.jit(pipeline.segment)(seg_params, rgb)
     return pipeline.segmented_image(rgb, masks), masks
 
@@ -101,28 +105,109 @@ def _fit_lstm(key, cfg, in_dim, latents, horizon, desc, progress: bool):
     return state, losses
 
 
-def pretrain(cfg: TrainConfig, env, seg_params, key, progress: bool = True):
-    """Returns (Pretrained, info) with datasets and loss histories for figures and tests."""
+def _digest(tree) -> str:
+    """Content hash of a pytree's arrays (identifies e.g. a fitted segmentation)."""
+    h = hashlib.sha256()
+    for x in jax.tree.leaves(tree):
+        h.update(np.asarray(x).tobytes())
+    return h.hexdigest()[:16]
+
+
+def _cached(cache: str | None, name: str, spec: dict, build, like):
+    """build() -> (pytree, losses). With a `cache` dir the result is stored there as
+    name-HASH(spec).npz and later runs with the same spec load it instead of building it
+    (the grid's runs of one task share their datasets and pre-trained models: same seed,
+    same config, same bytes). `like()` gives the pytree's structure (e.g. a jax.eval_shape)
+    for loading. Writes are atomic (a temp file renamed): two runs building the same entry
+    at once both write the same content."""
+    if cache is None:
+        return build()
+    text = json.dumps({"version": CHECKPOINT_VERSION, **spec}, sort_keys=True, default=str)
+    path = os.path.join(cache, f"{name}-{hashlib.sha256(text.encode()).hexdigest()[:16]}.npz")
+    treedef = jax.tree.structure(like())
+    if os.path.exists(path):
+        with np.load(path) as z:
+            leaves = [jax.numpy.asarray(z[f"leaf_{i}"]) for i in range(treedef.num_leaves)]
+            losses = z["losses"].tolist()
+        return jax.tree.unflatten(treedef, leaves), losses
+    tree, losses = build()
+    os.makedirs(cache, exist_ok=True)
+    tmp = f"{path}.tmp{os.getpid()}.npz"
+    np.savez(tmp, losses=np.asarray(losses if losses is not None else [], np.float64),
+             **{f"leaf_{i}": np.asarray(x) for i, x in enumerate(jax.tree.leaves(tree))})
+    os.replace(tmp, path)
+    with open(path[:-4] + ".json", "w") as f:  # what the entry is, for a reader of the dir
+        f.write(text)
+    return tree, losses
+
+
+def _key(k) -> list:
+    return np.asarray(k).tolist()
+
+
+def pretrain(cfg: TrainConfig, env, seg_params, key, progress: bool = True,
+             cache: str | None = None):
+    """Returns (Pretrained, info) with datasets and loss histories for figures and tests.
+    `cache`: a directory where datasets and trained models are shared between runs (see
+    `_cached`; info then holds only what this call built or loaded)."""
     enc = goal_encoder(cfg)
     k_sd, k_od, k_s, k_o, k_l = jax.random.split(key, 5)
     info = {}
-    scene_data = scene_dataset(env, k_sd, cfg.scene.n_pretrain_images)
-    scene, info["scene_loss"] = _fit_vae(k_s, cfg.scene, scene_data, None, "scene-VAE", progress)
-    info["scene_data"] = scene_data
+    n_scene = cfg.scene.n_pretrain_images
+    sd_spec = {"task": cfg.task, "n": n_scene, "key": _key(k_sd)}
+    data = {}
+
+    def scene_data():  # built or loaded once, only when a model is (re)trained on it
+        if "scene" not in data:
+            data["scene"], _ = _cached(
+                cache, "scene_data", sd_spec, lambda: (scene_dataset(env, k_sd, n_scene), None),
+                lambda: jax.ShapeDtypeStruct((n_scene,) + cfg.scene.image_shape, jax.numpy.uint8))
+            info["scene_data"] = data["scene"]
+        return data["scene"]
+
+    scene_spec = {"data": sd_spec, "cfg": dataclasses.asdict(cfg.scene), "key": _key(k_s)}
+    scene, info["scene_loss"] = _cached(
+        cache, "scene_vae", scene_spec,
+        lambda: _fit_vae(k_s, cfg.scene, scene_data(), None, "scene-VAE", progress),
+        lambda: jax.eval_shape(lambda: encoders.init_vae(k_s, cfg.scene)))
     obj_state = lstm_state = None
-    frame_params, frame_cfg, frame_data = scene.params, cfg.scene, scene_data
+    frame_params, frame_cfg, frame_spec, frame_data = scene.params, cfg.scene, scene_spec, scene_data
     if enc.object_cfg is not None:
-        obj_data, obj_masks = object_dataset(env, seg_params, k_od, enc.object_cfg.n_pretrain_images)
-        obj_state, info["object_loss"] = _fit_vae(k_o, enc.object_cfg, obj_data, obj_masks,
-                                                  "object-VAE", progress)
-        info["object_data"] = obj_data
-        frame_params, frame_cfg, frame_data = obj_state.params, enc.object_cfg, obj_data
+        ocfg, n_obj = enc.object_cfg, enc.object_cfg.n_pretrain_images
+        od_spec = {"task": cfg.task, "segmentation": _digest(seg_params), "n": n_obj,
+                   "key": _key(k_od)}
+
+        def object_data():
+            if "object" not in data:
+                shape = (n_obj,) + ocfg.image_shape
+                (data["object"], data["masks"]), _ = _cached(
+                    cache, "object_data", od_spec,
+                    lambda: (object_dataset(env, seg_params, k_od, n_obj), None),
+                    lambda: (jax.ShapeDtypeStruct(shape, jax.numpy.uint8),
+                             jax.ShapeDtypeStruct(shape[:-1], jax.numpy.bool_)))
+                info["object_data"] = data["object"]
+            return data["object"]
+
+        obj_spec = {"data": od_spec, "cfg": dataclasses.asdict(ocfg), "key": _key(k_o)}
+        obj_state, info["object_loss"] = _cached(
+            cache, "object_vae", obj_spec,
+            lambda: _fit_vae(k_o, ocfg, object_data(), data["masks"], "object-VAE", progress),
+            lambda: jax.eval_shape(lambda: encoders.init_vae(k_o, ocfg)))
+        frame_params, frame_cfg, frame_spec, frame_data = (obj_state.params, ocfg, obj_spec,
+                                                           object_data)
     if enc.lstm:
-        lat = jax.jit(encoders.encode_mean, static_argnames="cfg")(frame_params, frame_cfg,
-                                                                    frame_data)
         lcfg = cfg.lstm
-        lstm_state, info["lstm_loss"] = _fit_lstm(k_l, lcfg, enc.frame_dim, lat, cfg.horizon,
-                                                  "LSTM", progress)
+
+        def fit_lstm():
+            lat = jax.jit(encoders.encode_mean, static_argnames="cfg")(frame_params, frame_cfg,
+                                                                        frame_data())
+            return _fit_lstm(k_l, lcfg, enc.frame_dim, lat, cfg.horizon, "LSTM", progress)
+
+        lstm_state, info["lstm_loss"] = _cached(
+            cache, "lstm", {"frames": frame_spec, "cfg": dataclasses.asdict(lcfg),
+                            "in_dim": enc.frame_dim, "horizon": cfg.horizon, "key": _key(k_l)},
+            fit_lstm,
+            lambda: jax.eval_shape(lambda: encoders.init_lstm(k_l, lcfg, enc.frame_dim)))
     return Pretrained(scene_vae=scene, object_vae=obj_state, lstm=lstm_state), info
 
 

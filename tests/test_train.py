@@ -2,6 +2,7 @@
 seed axis; config validation."""
 
 import csv
+import json
 import os
 
 import jax
@@ -48,6 +49,12 @@ def test_writes_all_outputs(runs):
                  "segmentation/meta.json", "encoders/meta.json"):
         assert os.path.exists(os.path.join(full, name)), name
     assert sorted(os.listdir(os.path.join(full, "ckpt")))  # orbax steps
+    with open(os.path.join(full, "timings.json")) as f:
+        times = json.load(f)
+    assert [len(times["wall_s"][k]) for k in ("segmentation", "pretrain", "init", "chunks",
+                                               "final_eval")] == [1, 1, 1, 2, 1]
+    assert times["cpu_s"]["chunks"][0] > 0 and times["total_wall_s"] >= sum(
+        sum(v) for v in times["wall_s"].values())
     table = _csv(os.path.join(full, "metrics.csv"))
     # One row per seed per evaluation: the initial policy, after each of the 2 chunks.
     assert [int(r["env_steps"]) for r in table] == [0, 0, 500, 500, 1000, 1000]

@@ -201,7 +201,8 @@ def random_object_states(env, key, n: int, settle_steps: int = 5, chunk: int = 3
     def one(k):
         k_h, k_o, k_a = jax.random.split(k, 3)
         state = random_placement(env, k_h, k_o)
-        state, _ = rollout(env, state, random_actions(k_a, settle_steps, env.action_size))
+        if settle_steps:  # (0: kinematics only, no MJX step in the compiled program)
+            state, _ = rollout(env, state, random_actions(k_a, settle_steps, env.action_size))
         return env.render_both(state)
 
     # Fixed chunks of `chunk` states, one compile: a single vmap over ~750 pickup states sat
