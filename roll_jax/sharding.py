@@ -28,17 +28,22 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 AXIS = "seeds"
 
 
-def parse_devices(spec) -> int | None:
-    """'all' (or None) -> None (as many devices as divide the seeds); 'N' / N -> N >= 1."""
-    if spec is None or spec == "all":
+def _parse_count(spec, flag: str, word: str) -> int | None:
+    """`word` (or None) -> None; 'N' / N -> N >= 1; else a ValueError naming `flag`."""
+    if spec is None or spec == word:
         return None
     try:
         n = int(spec)
     except (TypeError, ValueError):
-        raise ValueError(f"--devices must be 'all' or a positive integer, got {spec!r}") from None
+        n = 0
     if n < 1:
-        raise ValueError(f"--devices must be 'all' or a positive integer, got {spec!r}")
+        raise ValueError(f"{flag} must be '{word}' or a positive integer, got {spec!r}")
     return n
+
+
+def parse_devices(spec) -> int | None:
+    """'all' (or None) -> None (as many devices as divide the seeds); 'N' / N -> N >= 1."""
+    return _parse_count(spec, "--devices", "all")
 
 
 def resolve(spec, seeds: int) -> list:
@@ -104,15 +109,7 @@ class SeedSharding:
 
 def parse_seed_batch(spec) -> int | None:
     """'auto' (or None) -> None; 'N' / N -> N >= 1 seeds vmapped together per device."""
-    if spec is None or spec == "auto":
-        return None
-    try:
-        n = int(spec)
-    except (TypeError, ValueError):
-        raise ValueError(f"--seed-batch must be 'auto' or a positive integer, got {spec!r}") from None
-    if n < 1:
-        raise ValueError(f"--seed-batch must be 'auto' or a positive integer, got {spec!r}")
-    return n
+    return _parse_count(spec, "--seed-batch", "auto")
 
 
 def resolve_seed_batch(spec, seeds: int, n_devices: int = 1, platform: str | None = None) -> int:
