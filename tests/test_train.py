@@ -11,7 +11,7 @@ import pytest
 
 from configs.segmentation import segmentation_config
 from configs.train import make_config
-from roll_jax import loop, train
+from roll_jax import loop, sharding, train
 
 
 def tiny(**kw):
@@ -97,8 +97,8 @@ def test_resume_refuses_other_config(runs, tmp_path):
 
 
 def test_equal_keys_give_equal_seeds(runs):
-    """Two seeds with the same key stay identical through a chunk (the seed axis is a pure
-    vmap: no cross-seed leakage)."""
+    """Two seeds with the same key stay identical through a chunk (no cross-seed leakage
+    through the seed axis)."""
     cfg, full, *_ = runs
     import envs_mjx
 
@@ -108,9 +108,30 @@ def test_equal_keys_give_equal_seeds(runs):
     # Built as train.init_seeds builds it, so the chunk's input types are the run's and its
     # compiled program comes from the persistent cache instead of a second compile.
     state = train.init_states(cfg, env, jax.numpy.stack([key, key]), pre)
-    state, m = loop.compile_chunk(cfg, env)(state, frozen, loop.plan_chunk(cfg, 0))
+    chunk = loop.compile_chunk(cfg, env, 1, sharding.resolve_seed_batch("auto", cfg.seeds))
+    state, m = chunk(state, frozen, loop.plan_chunk(cfg, 0))
     for leaf in jax.tree.leaves((state.sac, m)):
         np.testing.assert_array_equal(np.asarray(leaf[0]), np.asarray(leaf[1]))
+
+
+def test_reproduce_trains_a_real_cell(runs, tmp_path):
+    """The grid's real path (no fake run function): the fixture's tiny config as a one-cell
+    grid through `reproduce.main`. Its segmentation and pre-training go through the grid's
+    shared dirs, and it gives the fixture's run's metrics exactly (same seed)."""
+    from roll_jax import reproduce
+
+    _cfg, _full, rows, *_ = runs
+    out = tmp_path / "grid"
+    assert reproduce.main(["--preset", "smoke", "--out", str(out), "--tasks", "puck_push",
+                           "--algos", "roll", "--seeds", "2", "--set", "n_eval_goals=2",
+                           "segmentation.unet_epochs=2", "segmentation.eval_states=8"]) == 0
+    for name in ("figure4.png", "results.md", "results.csv", "runs/puck_push__roll/complete.json",
+                 "runs/puck_push__roll/timings.json", "segmentation/puck_push/meta.json"):
+        assert (out / name).exists(), name
+    assert len(list((out / "pretrain").glob("*.npz"))) == 5  # scene/object data, 2 VAEs, LSTM
+    grid = reproduce.read_metrics(str(out / "runs" / "puck_push__roll" / "metrics.csv"))
+    assert [(r["env_steps"], r["seed"], r["final_distance"], r["q_loss"]) for r in grid] == [
+        (r["env_steps"], r["seed"], r["final_distance"], r["q_loss"]) for r in rows]
 
 
 @pytest.mark.parametrize("kw, msg", [
