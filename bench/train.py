@@ -1,9 +1,10 @@
 """Training-loop benchmark: env steps/s of the compiled ROLL chunk and where its time goes.
 
 1. The whole chunk: `loop.compile_chunk` (jit of `loop.make_chunk` over the seeds, vmapped or,
-   with --seed-batch (auto: 1 on CPU), mapped; state donated: the code path `train.py` runs) for each --seeds count, lowered and compiled ahead
-   of time (compile time reported apart), then --chunks chunks; the first is a warm-up, the
-   second onwards are timed (steady state). env steps/s = seeds x epoch_env_steps / chunk time.
+   with --seed-batch (auto: 1 on CPU), mapped; state donated: the code path `train.py` runs)
+   for each --seeds count, lowered and compiled ahead of time (compile time reported apart),
+   then --chunks chunks; the first is a warm-up, the second onwards are timed (steady state).
+   env steps/s = seeds x epoch_env_steps / chunk time.
 2. Its parts, each its own jitted function over the same seeds and at the sizes one chunk uses,
    timed after a warm-up call:
      sim       episodes x horizon steps of vmap(env.step) (plus env.reset_episode per episode),
@@ -297,7 +298,8 @@ def bench_seeds(a, seeds: int, env) -> dict:
               f"{'  (warm-up, not in steady state)' if i == 0 else ''}", flush=True)
     finite = bool(all(jnp.all(jnp.isfinite(x)) for x in jax.tree.leaves(metrics)))
     steady = times[1:]
-    chunk_res = {"seed_batch": seed_batch, "lower_s": lower_s, "compile_s": compile_s, "first_chunk_s": times[0],
+    chunk_res = {"seed_batch": seed_batch, "lower_s": lower_s, "compile_s": compile_s,
+                 "first_chunk_s": times[0],
                  "steady_chunk_times_s": steady, "steady_chunk_median_s": statistics.median(steady),
                  "steady_chunk_min_s": min(steady), "steady_chunk_cpu_times_s": cpus[1:],
                  "steady_chunk_cpu_median_s": statistics.median(cpus[1:]),

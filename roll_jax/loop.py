@@ -373,8 +373,8 @@ def make_chunk(cfg: TrainConfig, env):
     """chunk(state, frozen, plan) -> (state, {"train": this chunk's training metrics, "eval":
     the evaluation of the policy the chunk started from, with "train" = the metrics of the
     chunk that trained it}) for ONE seed; the caller runs it over the seeds (frozen and plan
-    un-batched; `compile_chunk`) and jits. The policy after the last chunk is evaluated by one more chunk
-    with `eval_only_plan()`."""
+    un-batched; `compile_chunk`) and jits. The policy after the last chunk is evaluated by
+    one more chunk with `eval_only_plan()`."""
     enc = goal_encoder(cfg)
     n_updates = cfg.epoch_env_steps * cfg.sac.updates_per_step
 

@@ -124,8 +124,8 @@ def _cached(cache: str | None, name: str, spec: dict, build, like):
         return build()
     text = json.dumps({"version": CHECKPOINT_VERSION, **spec}, sort_keys=True, default=str)
     path = os.path.join(cache, f"{name}-{hashlib.sha256(text.encode()).hexdigest()[:16]}.npz")
-    treedef = jax.tree.structure(like())
     if os.path.exists(path):
+        treedef = jax.tree.structure(like())  # (traced only when loading)
         with np.load(path) as z:
             leaves = [jax.numpy.asarray(z[f"leaf_{i}"]) for i in range(treedef.num_leaves)]
             losses = z["losses"].tolist()

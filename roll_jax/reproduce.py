@@ -13,8 +13,9 @@ overwritten); an incomplete one is resumed from its last checkpoint. Every cell'
 built, and checked against what DIR already holds, before anything runs. The segmentation is
 fitted once per task (DIR/segmentation/TASK, shared by the task's ROLL runs: same seed, same
 config, so the same fit); pre-training datasets and models are shared the same way
-(DIR/pretrain, keyed by what they were built from). Then DIR/figure4.png, DIR/ablations.png (with --ablations),
-DIR/results.md and DIR/results.csv are drawn from the runs' metrics.csv files.
+(DIR/pretrain, keyed by what they were built from). Then DIR/figure4.png, DIR/ablations.png
+(with --ablations), DIR/results.md and DIR/results.csv are drawn from the runs' metrics.csv
+files.
 """
 
 from __future__ import annotations
@@ -146,15 +147,20 @@ def status(c: Cell) -> str:
     return "resume" if os.path.exists(os.path.join(c.out, "config.json")) else "new"
 
 
+def _grid_dir(run_out: str) -> str:
+    """DIR of a run in DIR/runs/TASK__VARIANT."""
+    return os.path.dirname(os.path.dirname(run_out))
+
+
 def seg_dir(c: Cell) -> str:
-    return os.path.join(os.path.dirname(os.path.dirname(c.out)), "segmentation", c.task)
+    return os.path.join(_grid_dir(c.out), "segmentation", c.task)
 
 
 def pretrain_dir(run_out: str) -> str:
     """DIR/pretrain: pre-training datasets and models the grid's runs share (content-keyed,
     `pretrain.pretrain(cache=...)`): a task's Skew-Fit and ablation runs reuse the scene data
     and scene-VAE its ROLL run trained when their configs match."""
-    return os.path.join(os.path.dirname(os.path.dirname(run_out)), "pretrain")
+    return os.path.join(_grid_dir(run_out), "pretrain")
 
 
 def _uses_segmentation(c: Cell) -> bool:
@@ -247,8 +253,8 @@ def run_grid(cells: list[Cell], a, run_fn=None, pool=None) -> dict[str, str]:
             print(f"{tag}: {'resuming' if what == 'resume' else 'starting'} in {c.out}", flush=True)
             t0 = time.time()
             run_fn(c.cfg, c.out, resume=what == "resume", seg_ckpt=seg_dir(c), seed=a.seed,
-                   devices=a.devices, seed_batch=a.seed_batch, pretrain_cache=pretrain_dir(c.out),
-                   progress=True)
+                   devices=a.devices, seed_batch=a.seed_batch,
+                   pretrain_cache=pretrain_dir(c.out), progress=True)
             print(f"{tag}: done in {time.time() - t0:.0f} s", flush=True)
             done[c.out] = "resumed" if what == "resume" else "ran"
         return done

@@ -141,7 +141,7 @@ def over_seeds(fn, seeds: int, n_devices: int = 1, seed_batch: int | None = None
     if per_step >= local:
         return vfn
     steps, width = local // per_step, n_devices * per_step
-    if width == 1:
+    if width == 1:  # a plain map: no vmap of batch 1 (XLA:CPU gives it other kernels)
         return lambda state, *shared: jax.lax.map(lambda s: fn(s, *shared), state)
 
     def split(x):  # [S] -> [steps, width]: step i holds the i-th group of every device

@@ -4,9 +4,9 @@
 from (test envs in the collection batch, `loop.collect_episode`); between chunks Python logs
 metrics.csv, checkpoints (orbax, the whole train state including the replay buffer), plots the
 learning curve and drives the progress bar; at the end it writes timings.json (wall and CPU
-seconds per phase; the first chunk's include its compile). Seeds are the state's leading axis, vmapped
-or mapped (`roll_jax.sharding.over_seeds`); with several devices that axis is sharded over
-them. A finished run gets `COMPLETE_MARKER` (complete.json), written atomically last.
+seconds per phase; the first chunk's include its compile). Seeds are the state's leading
+axis, vmapped or mapped (`roll_jax.sharding.over_seeds`); with several devices that axis is
+sharded over them. A finished run gets `COMPLETE_MARKER` (complete.json), written atomically last.
 """
 
 from __future__ import annotations
