@@ -112,19 +112,30 @@ def _tanh_gaussian_sample(key, mean, log_std):
     return jnp.tanh(u), jnp.sum(logp_u - log_det, axis=-1)
 
 
+def _log_std_bounds(cfg: SACConfig | None) -> tuple[float, float]:
+    """(log_std_min, log_std_max) of `cfg`; None means the SACConfig defaults."""
+    cfg = SACConfig() if cfg is None else cfg
+    return cfg.log_std_min, cfg.log_std_max
+
+
 def sample_action(policy_params, obs, goal, key, cfg: SACConfig | None = None):
     """(action, log_prob) with the reparameterization trick (gradients flow to the policy)."""
-    lo, hi = (-20.0, 2.0) if cfg is None else (cfg.log_std_min, cfg.log_std_max)
-    mean, log_std = policy_dist(policy_params, obs, goal, lo, hi)
+    mean, log_std = policy_dist(policy_params, obs, goal, *_log_std_bounds(cfg))
     return _tanh_gaussian_sample(key, mean, log_std)
 
 
-def select_action(policy_params, obs, goal, key, deterministic: bool = False):
-    """Action in [-1, 1] for acting: tanh(mean) if deterministic, else a policy sample."""
+def select_action(policy_params, obs, goal, key, deterministic: bool = False, *,
+                  cfg: SACConfig | None = None):
+    """Action in [-1, 1] for acting: tanh(mean) if deterministic, else a policy sample.
+
+    `cfg` gives the log-std clip (`log_std_min/max`) the sample uses, the same as training's
+    `sample_action`; None means the SACConfig defaults. Pass the run's SACConfig so acting and
+    training draw from the same distribution.
+    """
     if deterministic:
-        mean, _ = policy_dist(policy_params, obs, goal)
+        mean, _ = policy_dist(policy_params, obs, goal, *_log_std_bounds(cfg))
         return jnp.tanh(mean)
-    return sample_action(policy_params, obs, goal, key)[0]
+    return sample_action(policy_params, obs, goal, key, cfg)[0]
 
 
 # --------------------------------------------------------------------------- init

@@ -72,6 +72,27 @@ def test_shapes_and_select_action():
     assert sac._mlp_sizes(big.policy_params["params"]) == ((400, 300), 2 * ACT)
 
 
+def test_select_action_uses_config_log_std_bounds():
+    # Policy with mean 0 and raw log_std 5: the clip alone sets the spread of sampled actions.
+    state = init(jax.random.key(0), OBS, GOAL, ACT, SMALL)
+    pp = jax.tree.map(lambda x: x, state.policy_params)
+    out = pp["params"]["out"]
+    out["kernel"] = jnp.zeros_like(out["kernel"])
+    out["bias"] = jnp.concatenate([jnp.zeros(ACT), jnp.full(ACT, 5.0)])
+    obs, goal = jnp.zeros((256, OBS)), jnp.zeros((256, GOAL))
+    key = jax.random.key(1)
+    narrow = dataclasses.replace(SMALL, log_std_min=-12.0, log_std_max=-10.0)
+    a_narrow = sac.select_action(pp, obs, goal, key, cfg=narrow)
+    a_default = sac.select_action(pp, obs, goal, key)
+    # std = exp(-10): actions ~ tanh(0) = 0; default clip (max 2, std ~ 7.4): spread over [-1, 1].
+    assert float(jnp.abs(a_narrow).max()) < 1e-3
+    assert float(jnp.abs(a_default).mean()) > 0.5
+    # Acting draws what training's sample_action draws under the same config and key.
+    np.testing.assert_array_equal(a_narrow, sac.sample_action(pp, obs, goal, key, narrow)[0])
+    # cfg=None is the SACConfig defaults.
+    np.testing.assert_array_equal(a_default, sac.select_action(pp, obs, goal, key, cfg=SACConfig()))
+
+
 def test_tanh_gaussian_log_prob_matches_change_of_variables():
     mean, log_std = jnp.array([[0.3, -0.7]]), jnp.array([[-0.5, 0.2]])
     a, logp = sac._tanh_gaussian_sample(jax.random.key(3), mean, log_std)
