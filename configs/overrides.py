@@ -26,20 +26,71 @@ def parse_overrides(items) -> dict:
     return out
 
 
+def _split_top(text: str, sep: str) -> list[str]:
+    """`text` split at `sep` outside brackets ("tuple[int, int] | None" -> 2 parts at " | ")."""
+    parts, depth, start, i = [], 0, 0, 0
+    while i < len(text):
+        c = text[i]
+        depth += (c == "[") - (c == "]")
+        if depth == 0 and text.startswith(sep, i):
+            parts.append(text[start:i].strip())
+            i += len(sep)
+            start = i
+            continue
+        i += 1
+    return parts + [text[start:].strip()]
+
+
+def _fits(annotation: str, value) -> bool | None:
+    """Whether `value` is of the type `annotation` names (int, float, bool, str, None, unions
+    and tuple[...] of those); None for an annotation this does not check (e.g. a config class)."""
+    alternatives = _split_top(annotation, "|")
+    unchecked = False
+    for alt in alternatives:
+        if alt == "None":
+            ok = value is None
+        elif alt in _SCALARS:
+            kinds = _SCALARS[alt]
+            ok = isinstance(value, kinds) and (bool in kinds or not isinstance(value, bool))
+        elif alt.startswith("tuple[") and alt.endswith("]"):
+            items = _split_top(alt[len("tuple["):-1], ",")
+            if not isinstance(value, tuple):
+                ok = False
+            elif len(items) == 2 and items[1] == "...":
+                fits = [_fits(items[0], v) for v in value]
+                ok = None if None in fits else all(fits)
+            else:
+                fits = [_fits(t, v) for t, v in zip(items, value)]
+                ok = None if None in fits else (len(value) == len(items) and all(fits))
+        else:
+            ok = None
+        if ok:
+            return True
+        unchecked |= ok is None
+    return None if unchecked else False
+
+
+def check_field(cls, name: str, value, label: str | None = None) -> None:
+    """ValueError naming `--set LABEL=VALUE` (LABEL defaults to `name`) when `name` is not a
+    field of the config dataclass `cls` or `value` is not of its annotated type."""
+    fields = {f.name: f.type for f in dataclasses.fields(cls)}
+    label = name if label is None else label
+    if name not in fields:
+        raise ValueError(f"--set {label}: unknown field; {cls.__name__} has {', '.join(fields)}")
+    t = fields[name]
+    annotation = t if isinstance(t, str) else getattr(t, "__name__", str(t))
+    if _fits(annotation, value) is False:
+        raise ValueError(f"--set {label}={value!r}: expected a {annotation}")
+
+
 def field_overrides(cls, items) -> dict:
     """KEY=VALUE overrides of the flat config dataclass `cls` -> {field: value}; ValueError
     naming the item for a group, an unknown field or a value of the wrong type."""
-    fields = {f.name: f.type for f in dataclasses.fields(cls)}
     over = parse_overrides(items)
     groups = sorted(g for g in over if g)
     if groups:
         raise ValueError(f"--set {groups[0]}.*: {cls.__name__} has no nested configs")
     out = over.get("", {})
     for name, value in out.items():
-        if name not in fields:
-            raise ValueError(f"--set {name}: unknown field; {cls.__name__} has "
-                             f"{', '.join(fields)}")
-        kinds = _SCALARS.get(str(fields[name]))
-        if kinds and (not isinstance(value, kinds) or (bool not in kinds and isinstance(value, bool))):
-            raise ValueError(f"--set {name}={value!r}: expected a {fields[name]}")
+        check_field(cls, name, value)
     return out

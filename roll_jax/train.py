@@ -81,10 +81,16 @@ def build_config(task: str, algo: str, preset: str, seeds: int = 1, overrides=()
     """The config train.py and the reproduction grid run: `make_config` with `--set` style
     overrides (strings) and the ablation flags; ValueError on anything unknown or
     contradictory (nothing is compiled)."""
+    from configs.overrides import check_field
     from configs.train import make_config
 
     over = parse_overrides(overrides)
     top = dict(over.pop("", {}))
+    unknown = set(top) - {f.name for f in dataclasses.fields(TrainConfig)}
+    if unknown:
+        raise ValueError(f"--set: unknown config field(s) {sorted(unknown)}")
+    for name, value in top.items():
+        check_field(TrainConfig, name, value)
     top.update(seeds=seeds, matching_loss=matching_loss, use_lstm=use_lstm,
                use_object_vae=use_object_vae)
     base = make_config(task, algo, preset)
@@ -95,10 +101,9 @@ def build_config(task: str, algo: str, preset: str, seeds: int = 1, overrides=()
         unknown = set(fields) - {f.name for f in dataclasses.fields(sub)}
         if unknown:
             raise ValueError(f"--set: unknown field(s) {sorted(unknown)} in {group}")
+        for name, value in fields.items():
+            check_field(type(sub), name, value, f"{group}.{name}")
         top[group] = dataclasses.replace(sub, **fields)
-    unknown = set(top) - {f.name for f in dataclasses.fields(TrainConfig)}
-    if unknown:
-        raise ValueError(f"--set: unknown config field(s) {sorted(unknown)}")
     return make_config(task, algo, preset, **top)
 
 

@@ -27,3 +27,23 @@ def test_values_are_literals_of_the_field_type():
 def test_bad_overrides_name_the_item(item, msg):
     with pytest.raises(ValueError, match=msg):
         field_overrides(SegmentationConfig, [item])
+
+
+def test_nested_set_values_are_typed_like_flat_ones():
+    from roll_jax.train import build_config
+
+    cfg = build_config("puck_push", "roll", "smoke",
+                       overrides=["sac.hidden=(64, 64)", "sac.target_entropy=None",
+                                  "sac.tau=0.01", "lstm.online_schedule=((1000, 500, 2),)"])
+    assert cfg.sac.hidden == (64, 64) and cfg.sac.target_entropy is None and cfg.sac.tau == 0.01
+    assert cfg.lstm.online_schedule == ((1000, 500, 2),)
+    for item, msg in [
+        ("sac.hidden=abc", "--set sac.hidden='abc': expected a tuple\\[int, ...\\]"),
+        ("sac.hidden=(64, 1.5)", "--set sac.hidden=\\(64, 1.5\\): expected a tuple\\[int, ...\\]"),
+        ("sac.batch_size=big", "--set sac.batch_size='big': expected a int"),
+        ("sac.target_entropy=low", "--set sac.target_entropy='low': expected a float \\| None"),
+        ("lstm.online_schedule=((0, 500),)", "lstm.online_schedule=.*expected a tuple\\[tuple"),
+        ("total_env_steps=lots", "--set total_env_steps='lots': expected a int"),
+    ]:
+        with pytest.raises(ValueError, match=msg):
+            build_config("puck_push", "roll", "smoke", overrides=[item])
