@@ -43,14 +43,25 @@ class RolloutConfig:
 
 def build_config(a, p):
     """TrainConfig from parsed args; every error is reported before anything compiles."""
+    from configs.overrides import parse_overrides
     from roll_jax.train import build_config as build
 
+    overrides = list(a.set)
+    if a.n_envs is not None:
+        try:
+            set_n_envs = "n_envs" in parse_overrides(overrides).get("", {})
+        except ValueError as e:
+            p.error(str(e))
+        if set_n_envs:
+            p.error(f"--n-envs {a.n_envs} and --set n_envs=... both set n_envs; give one")
+        overrides.append(f"n_envs={a.n_envs}")
     try:
-        return build(a.task, a.algo, a.preset, seeds=a.seeds, overrides=a.set,
+        return build(a.task, a.algo, a.preset, seeds=a.seeds, overrides=overrides,
                      matching_loss=not a.no_matching_loss, use_lstm=not a.no_lstm,
                      use_object_vae=not a.no_object_vae)
     except (ValueError, TypeError) as e:
-        p.error(str(e))
+        msg = str(e)
+        p.error(f"--n-envs {a.n_envs}: {msg}" if a.n_envs is not None and "n_envs" in msg else msg)
 
 
 def parse_args(argv=None):
@@ -70,7 +81,9 @@ def parse_args(argv=None):
     p.add_argument("--enc-ckpt", default=None, help="pretrained encoders dir to reuse")
     p.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE")
     p.add_argument("--seed", type=int, default=0, help="base PRNG seed of the run")
-    p.add_argument("--n-envs", type=int, default=None, help="--algo random: envs per seed")
+    p.add_argument("--n-envs", type=int, default=None,
+                   help="envs per seed (TrainConfig.n_envs; for roll/skewfit epoch_env_steps "
+                        "must be a multiple of n_envs * horizon)")
     p.add_argument("--devices", default="all",
                    help="'all' or N: shard the seed axis over that many devices (seeds must be "
                         "divisible by it; 1 = unsharded)")
