@@ -254,6 +254,22 @@ def learning_curve(rows: list[dict], path: str, title: str) -> None:
     plt.close(fig)
 
 
+INT_COLUMNS = ("env_steps", "seed")  # metrics.csv columns that are ints; the rest are floats
+
+
+def read_rows(csv_path: str, keep: int, final: bool = False) -> list[dict]:
+    """The metrics.csv rows a resumed run keeps: those before env step `keep` (the checkpoint),
+    and the rows at `keep` too when `final` (a finished run's final evaluation). env_steps and
+    seed come back as ints (as `run` logs them), the other columns as floats."""
+    def parse(r: dict) -> dict:
+        # int(float(.)): also reads the "500.0" a resumed run used to write.
+        return {k: int(float(v)) if k in INT_COLUMNS else float(v) for k, v in r.items()}
+
+    with open(csv_path) as f:
+        rows = [parse(r) for r in csv.DictReader(f)]
+    return [r for r in rows if r["env_steps"] < keep or (final and r["env_steps"] == keep)]
+
+
 def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None = None,
         enc_ckpt: str | None = None, seed: int = 0, progress: bool = True,
         stop_after_epochs: int | None = None, devices="all", seed_batch="auto",
@@ -307,12 +323,8 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
         if sharding is not None:
             state = sharding.shard(state)
         # Rows of the chunks before the checkpoint; a finished run's final evaluation too.
-        keep = start_epoch * cfg.epoch_env_steps
-        with open(csv_path) as f:
-            rows = [{k: (float(v) if k not in ("seed",) else int(v)) for k, v in r.items()}
-                    for r in csv.DictReader(f)
-                    if float(r["env_steps"]) < keep or (start_epoch == cfg.n_epochs
-                                                        and float(r["env_steps"]) == keep)]
+        rows = read_rows(csv_path, start_epoch * cfg.epoch_env_steps,
+                         final=start_epoch == cfg.n_epochs)
     chunk = loop.compile_chunk(cfg, env, n_devices, per_device)
     if sharding is not None:
         chunk = sharding.wrap_chunk(chunk)

@@ -149,3 +149,34 @@ def test_config_rejects_bad_values(kw, msg):
     base = {"task": "puck_push", "algo": "roll", "preset": "smoke", "horizon": 50, "total_env_steps": 1000}
     with pytest.raises(ValueError, match=msg):
         TrainConfig(**{**base, **kw})
+
+
+def test_read_rows_keeps_int_columns(tmp_path):
+    # metrics.csv as run() writes it: int env_steps and seed, float metrics; 2 seeds x 3 evals.
+    path = str(tmp_path / "metrics.csv")
+    written = [{"env_steps": e, "seed": s, "final_distance": 0.5 + e / 1000 + s, "q_loss": 0.0}
+               for e in (0, 500, 1000) for s in (0, 1)]
+
+    def write(rows):
+        with open(path, "w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=list(rows[0]))
+            w.writeheader()
+            w.writerows(rows)
+        with open(path) as f:
+            return f.read()
+
+    text = write(written)
+    kept = train.read_rows(path, 1000)
+    assert kept == written[:4]  # before the checkpoint at 1000 env steps
+    assert all(type(r["env_steps"]) is int and type(r["seed"]) is int for r in kept)
+    assert all(type(r["final_distance"]) is float for r in kept)
+    assert train.read_rows(path, 1000, final=True) == written  # a finished run: the last eval too
+    # Rewriting the restored rows gives the same file (no "500.0" among "1000").
+    assert write(train.read_rows(path, 1000, final=True)) == text
+    assert "500.0" not in text
+    # A file an earlier resume wrote with float env steps reads back as ints.
+    legacy = text.replace("\n500,", "\n500.0,").replace("\n0,", "\n0.0,")
+    assert "\n500.0," in legacy and "\n0.0," in legacy
+    with open(path, "w", newline="") as f:
+        f.write(legacy)
+    assert train.read_rows(path, 1000, final=True) == written
