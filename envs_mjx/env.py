@@ -7,17 +7,42 @@ task spec); every method is a pure function of an `EnvState`, so `jax.jit(env.st
 
 from __future__ import annotations
 
+import contextlib
+import io
+import sys
+
 import jax
 import jax.numpy as jnp
 import mujoco
 import numpy as np
 from flax import struct
-from mujoco import mjx
 
-from envs_mjx import scenes
-from envs_mjx.arm import N_ARM_JOINTS, arm_ik
-from envs_mjx.render import Camera, Renderer
-from envs_mjx.tasks import PICKUP_AIR_GOAL_FRACTION, TaskSpec
+# What `mujoco.mjx.warp` prints (to stdout) on import when the optional warp backend is not
+# installed; we do not use that backend. Any other import failure of it still prints.
+WARP_MISSING_LINES = ("Failed to import warp: No module named 'warp'",
+                      "Failed to import mujoco_warp: No module named 'warp'")
+
+
+def _import_mjx():
+    """`mujoco.mjx` without the WARP_MISSING_LINES; everything else the import prints is
+    passed on to stdout."""
+    buf = io.StringIO()
+    try:
+        with contextlib.redirect_stdout(buf):
+            from mujoco import mjx
+    finally:
+        for line in buf.getvalue().splitlines(keepends=True):
+            if line.rstrip("\n") not in WARP_MISSING_LINES:
+                sys.stdout.write(line)
+    return mjx
+
+
+mjx = _import_mjx()
+
+from envs_mjx import scenes  # noqa: E402
+from envs_mjx.arm import N_ARM_JOINTS, arm_ik  # noqa: E402
+from envs_mjx.render import Camera, Renderer  # noqa: E402
+from envs_mjx.tasks import PICKUP_AIR_GOAL_FRACTION, TaskSpec  # noqa: E402
 
 ACTION_SCALE = 0.02  # metres of mocap motion per unit action (multiworld)
 

@@ -201,3 +201,35 @@ def test_mjx_matches_c_mujoco_on_scripted_actions(task):
     moved = np.abs(c_obj[-1] - np.asarray(env.object_state(s0))).max()
     assert moved > 0.02, "the script must move the object for the comparison to mean much"
     np.testing.assert_allclose(np.asarray(traj.obj), c_obj, atol=0.005)
+
+
+def _import_in_subprocess(code, pythonpath=None):
+    import os
+    import subprocess
+    import sys
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env = {**os.environ, "JAX_PLATFORMS": "cpu"}
+    if pythonpath:
+        env["PYTHONPATH"] = os.pathsep.join(p for p in (pythonpath, env.get("PYTHONPATH")) if p)
+    r = subprocess.run([sys.executable, "-c", code], cwd=root, env=env, capture_output=True,
+                       text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    return r.stdout, r.stderr
+
+
+def test_import_hides_only_the_missing_warp_lines(tmp_path):
+    from envs_mjx.env import WARP_MISSING_LINES
+
+    # Bare mujoco.mjx prints them (warp is not installed here): the lines still match mujoco's.
+    out, _ = _import_in_subprocess("from mujoco import mjx")
+    assert all(line in out.splitlines() for line in WARP_MISSING_LINES)
+    out, err = _import_in_subprocess("import envs_mjx; print('imported')")
+    assert out.splitlines() == ["imported"] and "Failed to import" not in err
+    # A warp that is installed but broken: what it prints and mjx's report of it get through.
+    (tmp_path / "warp").mkdir()
+    (tmp_path / "warp" / "__init__.py").write_text(
+        "print('fake warp loading')\nraise ImportError('fake warp is broken')\n")
+    out, _ = _import_in_subprocess("import envs_mjx", pythonpath=str(tmp_path))
+    assert "fake warp loading" in out
+    assert "Failed to import warp: fake warp is broken" in out.splitlines()
