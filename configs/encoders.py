@@ -62,6 +62,19 @@ class VAEConfig:
     # The paper's matching loss has no stop-gradient (reference code default too); True
     # detaches the clean encoding so only the occluded one moves.
     matching_one_sided: bool = False
+    # The KL weight per image. The reference code's reconstruction term is
+    # F.mse_loss(inputs, decoded, reduction='elementwise_mean') with the decoder output (which
+    # requires grad) as the second argument: in the PyTorch versions it pins (1.4; rlkit's
+    # 0.4.1) that call SUMS over the batch and all pixels (ROLL/LSTM_model.py `logprob`, rlkit
+    # rlkit/torch/vae/conv_vae.py; PyTorch issues #43228, #11149), while its KL is a batch MEAN
+    # (ROLL/LSTM_model.py ~l.222). Divided by the batch size B, the objective the published
+    # betas were tuned on is SSE(x) + (beta / B) KL(x) per image: True applies that (the
+    # default), False applies beta per image (which collapses the object-VAE: docs/analysis.md).
+    kl_per_batch_sum: bool = True
+    # B of that division: the batch the published beta was tuned with (Table 3: scene 64,
+    # object 128). A preset that trains on smaller batches for speed keeps the paper's
+    # objective by keeping this; None = batch_size.
+    kl_reference_batch: int | None = None
 
     def __post_init__(self):
         _check_positive(self, ("latent_dim", "feature_dim", "batch_size", "lr", "epochs",
@@ -73,12 +86,22 @@ class VAEConfig:
             raise ValueError(f"VAEConfig.matching_coef must be >= 0, got {self.matching_coef!r}")
         if not 0.0 <= self.occlusion_drop <= 1.0:
             raise ValueError(f"VAEConfig.occlusion_drop must be in [0, 1], got {self.occlusion_drop!r}")
+        if self.kl_reference_batch is not None and self.kl_reference_batch <= 0:
+            raise ValueError(f"VAEConfig.kl_reference_batch must be positive or None, got "
+                             f"{self.kl_reference_batch!r}")
         if self.recon_reduction not in ("sum", "mean"):
             raise ValueError(f"VAEConfig.recon_reduction must be 'sum' or 'mean', got {self.recon_reduction!r}")
 
     @property
     def image_shape(self) -> tuple[int, int, int]:
         return (self.image_size, self.image_size, 3)
+
+    @property
+    def effective_beta(self) -> float:
+        """The KL weight per image that the loss applies (see `kl_per_batch_sum`)."""
+        if not self.kl_per_batch_sum:
+            return self.beta
+        return self.beta / (self.kl_reference_batch or self.batch_size)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -139,6 +162,7 @@ def scene_vae_config(task: str, algo: str = "roll", **overrides) -> VAEConfig:
         "feature_dim": SCENE_FEATURE_DIM,
         "matching_coef": 0.0,  # the scene-VAE uses the plain beta-VAE loss ("Training schedules")
         "batch_size": 64,  # Table 3
+        "kl_reference_batch": 64,  # Table 3: the batch beta was tuned with (see effective_beta)
     }
     return VAEConfig(**{**values, **overrides})
 
@@ -152,6 +176,7 @@ def object_vae_config(task: str, **overrides) -> VAEConfig:
         "feature_dim": OBJECT_FEATURE_DIM,
         "matching_coef": _VAE_MATCHING_COEF[task],  # Table 2
         "batch_size": 128,  # Table 3
+        "kl_reference_batch": 128,  # Table 3: the batch beta was tuned with (see effective_beta)
     }
     return VAEConfig(**{**values, **overrides})
 

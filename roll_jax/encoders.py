@@ -111,7 +111,7 @@ def vae_train_step(state: VAEState, key: jax.Array, images: jax.Array, cfg: VAEC
         occluded = losses.occlude(k_occ, images, object_masks, cfg.occlusion_drop)
 
     def loss_fn(p):
-        return losses.vae_loss(p, vae_model(cfg), images, k_noise, cfg.beta, occluded=occluded,
+        return losses.vae_loss(p, vae_model(cfg), images, k_noise, cfg.effective_beta, occluded=occluded,
                                matching_coef=cfg.matching_coef, one_sided=cfg.matching_one_sided,
                                recon_reduction=cfg.recon_reduction)
 

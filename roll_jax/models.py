@@ -37,6 +37,14 @@ IMAGE_SHAPE = (48, 48, 3)
 _CONV = ((16, 5, 3), (32, 3, 2), (64, 3, 2))  # (filters, kernel, stride), "Network Architectures"
 _DECONV = ((32, 3, 2), (16, 3, 2), (3, 6, 3))
 _FEATURE_MAP = (3, 3, 64)  # 576 = 3*3*64
+HEAD_INIT_W = 1e-3  # rlkit ConvVAE init_w: the mean / log-variance heads
+
+
+def _uniform_init(scale: float):
+    def init(key, shape, dtype=jnp.float32):
+        return jax.random.uniform(key, shape, dtype, -scale, scale)
+
+    return init
 
 
 def to_float(images: jax.Array) -> jax.Array:
@@ -65,8 +73,11 @@ class ConvVAE(nn.Module):
     def setup(self):
         self.convs = [nn.Conv(f, (k, k), strides=(s, s), padding="VALID") for f, k, s in _CONV]
         self.feature = nn.Dense(self.feature_dim)
-        self.mean_head = nn.Dense(self.latent_dim)
-        self.logvar_head = nn.Dense(self.latent_dim)
+        # rlkit's ConvVAE: fc1 (mean) and fc2 (log-variance) weights and biases U(-1e-3, 1e-3)
+        # (init_w=1e-3), so training starts near the prior with the variance at its floor.
+        head_init = _uniform_init(HEAD_INIT_W)
+        self.mean_head = nn.Dense(self.latent_dim, kernel_init=head_init, bias_init=head_init)
+        self.logvar_head = nn.Dense(self.latent_dim, kernel_init=head_init, bias_init=head_init)
         self.dec_fc = nn.Dense(math.prod(_FEATURE_MAP))
         self.deconvs = [nn.ConvTranspose(f, (k, k), strides=(s, s), padding="VALID")
                         for f, k, s in _DECONV]
@@ -118,12 +129,7 @@ def _torch_lstm_init(hidden: int):
     """U(-1/sqrt(hidden), 1/sqrt(hidden)), torch.nn.LSTM's init (the reference code's LSTM).
     Also avoids flax's default orthogonal recurrent init, whose batched QR deadlocks XLA:CPU
     when a 2-layer, 128-unit init runs under jit(vmap(...)) over seeds (jaxlib 0.10.2)."""
-    bound = 1.0 / math.sqrt(hidden)
-
-    def init(key, shape, dtype=jnp.float32):
-        return jax.random.uniform(key, shape, dtype, -bound, bound)
-
-    return init
+    return _uniform_init(1.0 / math.sqrt(hidden))
 
 
 class LSTMEncoder(nn.Module):

@@ -33,7 +33,9 @@ from roll_jax.agent import goal_encoder
 from roll_jax.checkpoint import read_meta, write_meta
 from roll_jax.segmentation import pipeline
 
-CHECKPOINT_VERSION = 1
+# 2: the VAE losses weigh the KL by beta / B (VAEConfig.effective_beta); version-1 encoders
+# were trained with beta per image (a collapsed object-VAE) and are refused on load.
+CHECKPOINT_VERSION = 2
 
 
 @struct.dataclass
@@ -264,6 +266,12 @@ def load(path: str, cfg: TrainConfig) -> Pretrained:
     import orbax.checkpoint as ocp
 
     path, meta = read_meta(path, "encoder")
+    if meta.get("version") != CHECKPOINT_VERSION:
+        raise ValueError(
+            f"encoder checkpoint {path} has version {meta.get('version')!r}, this code needs "
+            f"{CHECKPOINT_VERSION}: version 1 encoders were trained with the KL weighted by beta "
+            f"per image instead of the reference code's beta / batch (VAEConfig.effective_beta), "
+            f"which collapses the object-VAE; pretrain them again")
     want = _meta(cfg)
     for k in ("task", "image_shape", "scene_latent", "object_latent", "lstm",
               "object_matching_coef"):

@@ -28,11 +28,91 @@ FIT = jax.jit(encoders.vae_fit_epoch, static_argnames="cfg")
 
 @pytest.fixture(scope="module")
 def vae():
-    # beta=1, not the paper's 20: for a 6-pixel-radius disc beta=20 makes the collapsed
-    # posterior optimal (position costs more nats than the pixels it explains), and this
-    # fixture must show that the network and loss *can* learn the object's position.
-    cfg = object_vae_config("puck_push", batch_size=8, batches_per_epoch=25, beta=1.0)
+    # The paper's beta 20 under the reference scaling (20 / 128 per image), on batches of 8.
+    cfg = object_vae_config("puck_push", batch_size=8, batches_per_epoch=25)
     return cfg, encoders.init_vae(jax.random.key(0), cfg)
+
+
+def test_effective_beta_is_beta_over_reference_batch():
+    obj = object_vae_config("puck_push")
+    assert obj.kl_per_batch_sum and obj.effective_beta == 20.0 / 128
+    assert object_vae_config("puck_push", batch_size=32).effective_beta == 20.0 / 128
+    assert object_vae_config("puck_push", kl_per_batch_sum=False).effective_beta == 20.0
+    assert object_vae_config("puck_push", kl_reference_batch=None,
+                             batch_size=32).effective_beta == 20.0 / 32
+    with pytest.raises(ValueError, match="kl_reference_batch"):
+        object_vae_config("puck_push", kl_reference_batch=0)
+
+
+def test_vae_train_step_loss_is_the_reference_objective():
+    """The step's loss equals (sum over the batch of SSE + beta * batch-mean KL + c * sum over
+    batch and latent dims of the matching distance) / B, computed by hand."""
+    b = 4
+    cfg = object_vae_config("puck_push", batch_size=b, kl_reference_batch=b)
+    state = encoders.init_vae(jax.random.key(3), cfg)
+    images = disc_images(b, radius=8.0)
+    key = jax.random.key(5)
+    _, metrics = jax.jit(encoders.vae_train_step, static_argnames="cfg")(state, key, images, cfg)
+
+    model = encoders.vae_model(cfg)
+    k_noise, k_occ = jax.random.split(key)  # as vae_train_step splits its key
+    occluded = losses.occlude(k_occ, images, None, cfg.occlusion_drop)
+    mean, logvar = model.apply(state.params, images, method=type(model).encode)
+    z = mean + np.exp(0.5 * np.asarray(logvar)) * jax.random.normal(k_noise, mean.shape)
+    recon = np.asarray(model.apply(state.params, z, method=type(model).decode), np.float64)
+    x = np.asarray(images, np.float64) / 255.0
+    mean, logvar = np.asarray(mean, np.float64), np.asarray(logvar, np.float64)
+    sse_sum = np.sum((recon - x) ** 2)
+    kl_mean = np.mean(0.5 * np.sum(np.exp(logvar) + mean**2 - 1.0 - logvar, -1))
+    m_occ = np.asarray(model.apply(state.params, occluded, method=type(model).encode)[0])
+    match_sum = np.sum((mean - m_occ) ** 2)
+    hand = (sse_sum + cfg.beta * kl_mean + cfg.matching_coef * match_sum) / b
+    np.testing.assert_allclose(float(metrics["loss"]), hand, rtol=2e-5)
+    assert float(metrics["matching"]) > 0.0  # the matching term took part
+
+
+def _random_discs(n: int, seed: int, radius: float = 5.0):
+    """Segmented images of a disc at uniform random positions, and the positions [n, 2]."""
+    rng = np.random.default_rng(seed)
+    pos = rng.uniform(10.0, 38.0, (n, 2))
+    yy, xx = np.mgrid[:48, :48]
+    inside = ((yy[None] - pos[:, 0, None, None]) ** 2
+              + (xx[None] - pos[:, 1, None, None]) ** 2) <= radius**2
+    img = np.zeros((n, 48, 48, 3), np.uint8)
+    img[inside] = (200, 60, 40)
+    return jnp.asarray(img), pos
+
+
+def _position_r2(latents, pos) -> float:
+    """R^2 of a least-squares affine fit of the positions from the latents (both axes)."""
+    x = np.concatenate([np.asarray(latents, np.float64), np.ones((len(pos), 1))], 1)
+    coef, *_ = np.linalg.lstsq(x, pos, rcond=None)
+    res = np.sum((x @ coef - pos) ** 2)
+    return float(1.0 - res / np.sum((pos - pos.mean(0)) ** 2))
+
+
+@pytest.mark.parametrize("per_batch_sum", [True, False])
+def test_object_vae_collapses_only_with_beta_per_image(per_batch_sum):
+    """The paper's beta 20 on a moving-disc object-VAE: under the reference scaling (20/128
+    per image) the latents encode the disc's position; applied per image, the posterior
+    collapses to the prior."""
+    cfg = object_vae_config("puck_push", batch_size=32, batches_per_epoch=100,
+                            kl_per_batch_sum=per_batch_sum)
+    train, train_pos = _random_discs(512, 0)
+    test, test_pos = _random_discs(256, 1)
+    state = encoders.init_vae(jax.random.key(0), cfg)
+    fit = jax.jit(encoders.vae_fit_epoch, static_argnames="cfg")
+    for epoch in range(4):
+        state, m = fit(state, jax.random.key(10 + epoch), train, cfg)
+    kl = float(m["kl"][-20:].mean())
+    mean = jax.jit(encoders.encode_mean, static_argnames="cfg")(state.params, cfg, test)
+    r2 = _position_r2(mean, test_pos)
+    spread = float(jnp.max(jnp.std(mean, 0)))  # against the prior's (and posterior's) std ~1
+    print(f"per_batch_sum={per_batch_sum}: KL {kl:.3f} nats, r2 {r2:.3f}, spread {spread:.3f}")
+    if per_batch_sum:
+        assert kl > 1.0 and r2 > 0.8 and spread > 0.2, (kl, r2, spread)
+    else:  # collapsed: the means barely move and carry almost no nats
+        assert kl < 0.1 and spread < 0.05, (kl, r2, spread)
 
 
 def test_kl_divergence():

@@ -240,3 +240,13 @@ def test_encoder_checkpoint_of_full_roll_is_refused_by_the_matching_ablation(tmp
     write_meta(str(tmp_path / "enc"), pretrain._meta(full))
     with pytest.raises(ValueError, match="object_matching_coef"):
         pretrain.load(str(tmp_path / "enc"), ablated)
+
+
+def test_encoder_checkpoint_of_the_old_kl_scaling_is_refused(tmp_path):
+    from roll_jax import pretrain
+
+    cfg = make_config("puck_push", "roll", "smoke")
+    old = {**pretrain._meta(cfg), "version": 1}
+    write_meta(str(tmp_path / "enc"), old)
+    with pytest.raises(ValueError, match="beta per image"):
+        pretrain.load(str(tmp_path / "enc"), cfg)
