@@ -8,7 +8,9 @@ collects every run's `timings.json` (wall and CPU seconds per phase) into one JS
     python bench/grid.py --out DIR --summarize-only --wall-s S   # a grid timed by hand
 
 With --summarize-only nothing runs: the runs already in DIR are collected and the wall time
-is the one given (measured around the same command, e.g. with time(1)); the JSON says so.
+is the one given (measured around the same command, e.g. with time(1)); the JSON says so in
+`wall_how` ("given (--wall-s S): ..." rather than "timed by bench/grid.py ..."). The committed
+bench/results/grid_smoke.json is such a summary: that grid was timed with time(1).
 """
 
 from __future__ import annotations
@@ -39,11 +41,25 @@ def collect(out: str) -> list[dict]:
         wall, cpu = t["wall_s"], t["cpu_s"]
         row = {"run": name, "total_wall_s": t["total_wall_s"], "total_cpu_s": t["total_cpu_s"]}
         for k in PHASES:
-            row[f"{k}_wall_s"] = sum(wall.get(k, []))
-            row[f"{k}_cpu_s"] = sum(cpu.get(k, []))
+            row[f"{k}_wall_s"] = round(sum(wall.get(k, [])), 2)
+            row[f"{k}_cpu_s"] = round(sum(cpu.get(k, [])), 2)
         row["first_chunk_wall_s"] = wall["chunks"][0]
         runs.append(row)
     return runs
+
+
+def summarize(runs: list[dict], command: str, wall: float, how: str) -> dict:
+    """The results JSON: the grid's wall time (`how`: timed here or given by hand) and the
+    sums over the `collect`ed runs."""
+    return {"command": command, "machine": {"cpu_count": os.cpu_count(),
+                                            "platform": platform.platform()},
+            "wall_s": round(wall, 1), "wall_min": round(wall / 60, 2), "wall_how": how,
+            "target_wall_min": 20, "runs": len(runs),
+            "sum_run_wall_s": round(sum(r["total_wall_s"] for r in runs), 1),
+            "sum_run_cpu_s": round(sum(r["total_cpu_s"] for r in runs), 1),
+            "first_chunk_wall_s": round(sum(r["first_chunk_wall_s"] for r in runs), 1),
+            "phase_wall_s": {k: round(sum(r[f"{k}_wall_s"] for r in runs), 1) for k in PHASES},
+            "per_run": runs}
 
 
 def main(argv=None) -> int:
@@ -61,7 +77,8 @@ def main(argv=None) -> int:
     if a.summarize_only:
         if a.wall_s is None or a.wall_s <= 0:
             p.error(f"--summarize-only needs --wall-s > 0, got {a.wall_s}")
-        wall, how = a.wall_s, "given (--wall-s): timed by hand around the same command"
+        wall = a.wall_s
+        how = f"given (--wall-s {a.wall_s:g}): timed by hand around the same command"
     else:
         if os.path.exists(os.path.join(a.out, "runs")):
             p.error(f"{a.out} already holds runs: a timed grid needs a fresh --out")
@@ -69,16 +86,8 @@ def main(argv=None) -> int:
         t0 = time.perf_counter()
         subprocess.run(cmd, cwd=ROOT, check=True)
         wall, how = time.perf_counter() - t0, f"timed by bench/grid.py (load at start {load})"
-    runs = collect(a.out)
-    totals = {k: round(sum(r[f"{k}_wall_s"] for r in runs), 1) for k in PHASES}
-    res = {"command": " ".join(cmd[1:]), "machine": {"cpu_count": os.cpu_count(),
-                                                     "platform": platform.platform()},
-           "wall_s": round(wall, 1), "wall_min": round(wall / 60, 2), "wall_how": how,
-           "target_wall_min": 20, "runs": len(runs),
-           "sum_run_wall_s": round(sum(r["total_wall_s"] for r in runs), 1),
-           "sum_run_cpu_s": round(sum(r["total_cpu_s"] for r in runs), 1),
-           "first_chunk_wall_s": round(sum(r["first_chunk_wall_s"] for r in runs), 1),
-           "phase_wall_s": totals, "per_run": runs}
+    res = summarize(collect(a.out), " ".join(cmd[1:]), wall, how)
+    totals = res["phase_wall_s"]
     os.makedirs(os.path.dirname(os.path.abspath(a.results)), exist_ok=True)
     with open(a.results, "w") as f:
         json.dump(res, f, indent=2)
