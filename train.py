@@ -21,12 +21,7 @@ import os
 import sys
 import time
 
-ALGOS = ("roll", "skewfit", "random")
-RANDOM_PRESETS = {
-    # n_envs per seed, episodes, frame size of the saved video frames
-    "smoke": {"n_envs": 4, "episodes": 1, "video_size": 128},
-    "paper": {"n_envs": 64, "episodes": 4, "video_size": 128},
-}
+ALGOS = ("roll", "skewfit", "oracle", "random")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -95,13 +90,15 @@ def parse_args(argv=None):
         p.error(f"unknown --task {a.task!r}; expected one of {', '.join(envs_mjx.TASK_NAMES)}")
     if a.algo not in ALGOS:
         p.error(f"unknown --algo {a.algo!r}; expected one of {', '.join(ALGOS)}")
-    if a.preset not in RANDOM_PRESETS:
-        p.error(f"unknown --preset {a.preset!r}; expected one of {', '.join(RANDOM_PRESETS)}")
+    from configs import presets
+
+    if a.preset not in presets.PRESETS:
+        p.error(f"unknown --preset {a.preset!r}; expected one of {', '.join(presets.PRESETS)}")
     if a.seeds < 1:
         p.error(f"--seeds must be >= 1, got {a.seeds}")
     out = a.out or os.path.join("runs", f"{a.task}_{a.algo}_{a.preset}")
     if a.algo == "random":
-        preset = dict(RANDOM_PRESETS[a.preset])
+        preset = dict(presets.get(a.preset)["rollout"])
         if a.n_envs is not None:
             if a.n_envs < 1:
                 p.error(f"--n-envs must be >= 1, got {a.n_envs}")

@@ -81,5 +81,3 @@ class SACConfig:
         """Target entropy of the automatic alpha tuning: `target_entropy`, or -action_dim."""
         return float(-action_dim) if self.target_entropy is None else float(self.target_entropy)
 
-
-SMOKE = {"hidden": (32, 32), "batch_size": 64, "replay_size": 2_000, "learning_starts": 200}

@@ -17,16 +17,20 @@ from configs.encoders import (
     object_vae_config,
     scene_vae_config,
 )
-from configs.sac import SMOKE as SAC_SMOKE
+from configs import presets
+from configs.presets import PRESETS
 from configs.sac import SACConfig
 from configs.segmentation import SegmentationConfig, segmentation_config
 
 TASKS = ("puck_push", "hurdle_bottom", "hurdle_top", "door_open", "pickup")
-ALGOS = ("roll", "skewfit")
-PRESETS = ("smoke", "paper")
+# "oracle": the same loop with the true hand and object positions for latents and the true
+# distance as reward (no images encoded): a check of SAC, HER and the loop themselves.
+ALGOS = ("roll", "skewfit", "oracle")
+REWARD_NORMS = ("squared", "l2")
 
-# rlkit vae_schedules (Skew-Fit appendix C.5): epoch -> (train?, batches).
-VAE_SCHEDULES = ("custom_schedule", "custom_schedule_2", "smoke")
+# rlkit vae_schedules (Skew-Fit appendix C.5): epoch -> (train?, batches); "none": the scene-VAE
+# is trained in pretraining only (the cpu preset's ROLL).
+VAE_SCHEDULES = ("custom_schedule", "custom_schedule_2", "smoke", "none")
 
 
 def vae_schedule(name: str, epoch: int) -> int:
@@ -45,6 +49,8 @@ def vae_schedule(name: str, epoch: int) -> int:
         return 200 if epoch % 2 == 0 else 0
     if name == "smoke":  # CPU smoke runs: a little training every epoch, same code path
         return 5
+    if name == "none":
+        return 0
     raise ValueError(f"unknown VAE schedule {name!r}; expected one of {VAE_SCHEDULES}")
 
 
@@ -64,6 +70,12 @@ class TrainConfig:
     skew_num_latents: int = 10  # rlkit Skew-Fit priority: importance samples per image
     vae_schedule: str = "custom_schedule_2"  # Skew-Fit appendix C.5 (rlkit vae_schedules)
     vae_online_batch: int = 64  # Table 3: scene-VAE batch size
+    # The buffer's cached goal latents (LSTM outputs) are recomputed after online encoder
+    # training every this many epochs (1: after each training, as rlkit refreshes its latents).
+    refresh_every_epochs: int = 1
+    # Reward -||z' - z_g||^2 ("squared", the paper's equation) or -||z' - z_g|| ("l2", the
+    # reference code's LSTM_wrapped_env.py ~l.303).
+    reward_norm: str = "squared"
     # Ablations (paper section "Ablations"), flags on --algo roll.
     matching_loss: bool = True
     use_lstm: bool = True
@@ -84,7 +96,7 @@ class TrainConfig:
             raise ValueError(f"unknown preset {self.preset!r}; expected one of {', '.join(PRESETS)}")
         for name in ("horizon", "total_env_steps", "epoch_env_steps", "n_envs", "seeds",
                      "eval_every_epochs", "n_eval_goals", "vae_online_batch", "skew_num_latents",
-                     "keep_checkpoints"):
+                     "keep_checkpoints", "refresh_every_epochs"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"TrainConfig.{name} must be positive, got {getattr(self, name)}")
         if self.epoch_env_steps % (self.n_envs * self.horizon):
@@ -94,14 +106,26 @@ class TrainConfig:
         if self.total_env_steps % self.epoch_env_steps:
             raise ValueError(f"TrainConfig.total_env_steps={self.total_env_steps} must be a "
                              f"multiple of epoch_env_steps={self.epoch_env_steps}")
+        if self.reward_norm not in REWARD_NORMS:
+            raise ValueError(f"unknown reward_norm {self.reward_norm!r}; expected one of "
+                             f"{', '.join(REWARD_NORMS)}")
+        if self.sac.learning_starts >= self.total_env_steps:
+            raise ValueError(f"sac.learning_starts={self.sac.learning_starts} is not below "
+                             f"total_env_steps={self.total_env_steps}: the run would never learn")
+        if self.eval_every_epochs > self.n_epochs:
+            raise ValueError(f"eval_every_epochs={self.eval_every_epochs} is longer than the run "
+                             f"(total_env_steps={self.total_env_steps} = {self.n_epochs} epochs)")
+        if self.sac.replay_size < self.epoch_env_steps:
+            raise ValueError(f"sac.replay_size={self.sac.replay_size} is smaller than one chunk "
+                             f"(epoch_env_steps={self.epoch_env_steps})")
         if self.vae_schedule not in VAE_SCHEDULES:
             raise ValueError(f"unknown vae_schedule {self.vae_schedule!r}; expected one of "
                              f"{VAE_SCHEDULES}")
         ablated = [n for n, on in (("--no-matching-loss", not self.matching_loss),
                                    ("--no-lstm", not self.use_lstm),
                                    ("--no-object-vae", not self.use_object_vae)) if on]
-        if self.algo == "skewfit" and ablated:
-            raise ValueError(f"{', '.join(ablated)} ablate ROLL; they contradict --algo skewfit")
+        if self.algo != "roll" and ablated:
+            raise ValueError(f"{', '.join(ablated)} ablate ROLL; they contradict --algo {self.algo}")
         if not self.use_lstm and not self.use_object_vae:
             raise ValueError("--no-lstm and --no-object-vae together remove the whole object "
                              "encoder; pick one")
@@ -144,35 +168,21 @@ def _task_module(task: str):
     return importlib.import_module(f"configs.{task}")
 
 
-# What the smoke preset shrinks (CPU, minutes); the rest stays at the paper's values. Two
-# chunks (3 evaluations: 0, 500, 1000 env steps) and 50 VAE pre-training steps on batches of
-# 32 (the paper's 128 made the object-VAE the slowest part of a smoke run's pre-training):
-# the smoke preset proves the path end to end (the 13-cell grid on 2 cores), not learning.
-SMOKE_TRAIN = {"total_env_steps": 1000, "epoch_env_steps": 500, "eval_every_epochs": 1,
-               "n_eval_goals": 4, "vae_schedule": "smoke", "skew_num_latents": 2}
-SMOKE_VAE = {"epochs": 10, "batches_per_epoch": 5, "batch_size": 32, "n_pretrain_images": 200}
-SMOKE_LSTM = {"epochs": 10, "batches_per_epoch": 5, "batch_size": 16, "online_batch_size": 4,
-                  "online_schedule": ((2**62, 500, 2),)}
-
-
 def make_config(task: str, algo: str = "roll", preset: str = "paper", **overrides) -> TrainConfig:
     """The config of `task` x `algo` x `preset`; keyword overrides win (nested configs are
     replaced whole: pass e.g. sac=dataclasses.replace(cfg.sac, batch_size=256))."""
     mod = _task_module(task)
-    if preset not in PRESETS:
-        raise ValueError(f"unknown preset {preset!r}; expected one of {', '.join(PRESETS)}")
+    pre = presets.get(preset)
     values = dict(mod.TRAIN)
-    smoke = preset == "smoke"
-    vae_o = SMOKE_VAE if smoke else {}
     values.update(
         segmentation=segmentation_config(task, preset),
-        scene_vae=scene_vae_config(task, algo if algo in ALGOS else "roll", **vae_o),
-        object_vae=object_vae_config(task, **vae_o),
-        lstm=lstm_config(task, **(SMOKE_LSTM if smoke else {})),
-        sac=SACConfig(**(SAC_SMOKE if smoke else {})),
+        scene_vae=scene_vae_config(task, "skewfit" if algo == "skewfit" else "roll",
+                                   **pre["scene_vae"]),
+        object_vae=object_vae_config(task, **pre["object_vae"]),
+        lstm=lstm_config(task, **pre["lstm"]),
+        sac=SACConfig(**pre["sac"]),
     )
-    if smoke:
-        values.update(SMOKE_TRAIN)
+    values.update(pre["train"])
     values.update(overrides)
     if not values.get("use_object_vae", True) and "lstm" not in overrides:
         # --no-object-vae: the LSTM runs on (and reconstructs) scene-VAE latents.

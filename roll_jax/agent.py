@@ -46,6 +46,9 @@ class GoalEncoder:
     # Fresh goals (exploration, HER's fresh share) from the replay buffer skewed by p(x)^alpha
     # (Skew-Fit) instead of the prior (ROLL's Algorithm 1); see loop.fresh_goals.
     skewed_goals: bool = False
+    # The state oracle: true hand and object positions instead of latents, the true distance as
+    # reward, nothing rendered for learning (loop.oracle_obs / oracle_goal).
+    oracle: bool = False
 
     @property
     def frame_dim(self) -> int:
@@ -89,6 +92,8 @@ class GoalEncoder:
 
 def goal_encoder(cfg) -> GoalEncoder:
     """The GoalEncoder of a TrainConfig (algo + ablation flags)."""
+    if cfg.algo == "oracle":
+        return GoalEncoder(cfg.scene, None, segment=False, lstm=False, oracle=True)
     if cfg.algo == "skewfit":
         return GoalEncoder(cfg.scene, None, segment=False, lstm=False, skewed_goals=True)
     if not cfg.use_object_vae:

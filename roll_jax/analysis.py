@@ -632,15 +632,15 @@ def main(argv=None):
     a2 = sub.add_parser("occlusion", help="appendix A occlusion retrieval")
     a2.add_argument("--task", default="hurdle_top", choices=sorted(HURDLE_PATHS))
     a2.add_argument("--n-train", type=int, default=None,
-                    help="training trajectories (default: smoke 64, paper 500)")
+                    help="training trajectories (default: the preset's, configs/presets.py)")
     a2.add_argument("--n-eval", type=int, default=None,
-                    help="evaluation trajectories = queries (default: smoke 64, paper 200)")
+                    help="evaluation trajectories = queries (default: the preset's)")
     a2.add_argument("--horizon", type=int, default=None, help="frames per trajectory (task's)")
     a2.add_argument("--lstm-steps", type=int, default=None,
-                    help="steps per LSTM (default: smoke 200, paper 10000)")
+                    help="steps per LSTM (default: the preset's)")
     a2.add_argument("--vae-steps", type=int, default=None,
-                    help="object-VAE fine-tuning steps on the trajectories (default: smoke 200, "
-                         "paper 5000)")
+                    help="object-VAE fine-tuning steps on the trajectories (default: the "
+                         "preset's)")
     a2.add_argument("--batch", type=int, default=25, help="LSTM batch (trajectories), default 25")
     a2.add_argument("--drop", type=float, default=OCCLUSION_DROP)
     for a in (a1, a2):
@@ -655,9 +655,9 @@ def main(argv=None):
         if a.cmd == "latent-vs-distance":
             res = run_latent_vs_distance(a.task, a.ckpt, out, a.n, a.seed, a.preset)
         else:
-            smoke = _ckpt_preset(a.ckpt, a.preset) == "smoke"
-            d = ({"n_train": 64, "n_eval": 64, "lstm_steps": 200, "vae_steps": 200} if smoke
-                 else {"n_train": 500, "n_eval": 200, "lstm_steps": 10000, "vae_steps": 5000})
+            from configs import presets
+
+            d = presets.get(_ckpt_preset(a.ckpt, a.preset))["occlusion"]
             res = run_occlusion(a.ckpt, out, a.task,
                                 n_train=a.n_train or d["n_train"], n_eval=a.n_eval or d["n_eval"],
                                 horizon=a.horizon,

@@ -12,10 +12,14 @@ A chunk, for one seed (the caller runs it over the seed axis, `sharding.over_see
      whole trajectories with cached latents and Skew-Fit log p(x) in the replay buffer;
   3. 2 SAC updates per collected transition on HER-relabeled batches (rlkit's order: collect
      the epoch's steps, then train);
-  4. scheduled scene-VAE training on Skew-Fit-skewed replay images and online LSTM training
-     (auto-encoder + matching loss), then a refresh of every cached latent in the buffer.
+  4. scheduled scene-VAE training on Skew-Fit-skewed replay images (then the buffer's scene
+     latents are recomputed) and online LSTM training (auto-encoder + matching loss) on the
+     buffer's cached frame latents; the cached goal latents are recomputed from those on the
+     refresh schedule (the frozen object-VAE's latents never change, so no image is
+     re-encoded for them).
 How much of 3 and 4 happens is decided per chunk in Python (schedules are functions of the
-env step) and passed in as un-batched scalars, so the chunk compiles once.
+env step) and passed in as un-batched scalars, so the chunk compiles once. `--algo oracle`
+runs the same chunk with true positions for latents (`oracle_obs`, `oracle_goal`).
 """
 
 from __future__ import annotations
@@ -68,12 +72,14 @@ class ChunkPlan:
     act_random: jax.Array  # bool: uniform random actions (before learning_starts)
     vae_batches: jax.Array  # int32: scene-VAE batches after collection (0 = none)
     lstm_batches: jax.Array  # int32: LSTM batches after collection (0 = none)
+    refresh_goals: jax.Array  # bool: recompute the buffer's cached goal latents (LSTM outputs)
 
 
 def eval_only_plan() -> ChunkPlan:
     """A chunk that learns nothing: run after the last epoch for the final evaluation."""
     return ChunkPlan(learn=jnp.bool_(False), act_random=jnp.bool_(False),
-                     vae_batches=jnp.int32(0), lstm_batches=jnp.int32(0))
+                     vae_batches=jnp.int32(0), lstm_batches=jnp.int32(0),
+                     refresh_goals=jnp.bool_(False))
 
 
 def train_metric_keys(cfg: TrainConfig) -> tuple[str, ...]:
@@ -83,20 +89,31 @@ def train_metric_keys(cfg: TrainConfig) -> tuple[str, ...]:
     return keys + (("lstm_loss",) if goal_encoder(cfg).lstm else ())
 
 
+def _lstm_batches(cfg: TrainConfig, epoch: int) -> int:
+    if not goal_encoder(cfg).lstm:
+        return 0
+    start = epoch * cfg.epoch_env_steps
+    every, batches = cfg.lstm.online_batches(start)
+    # Train when the epoch crosses a multiple of `every` env steps.
+    return batches if (start + cfg.epoch_env_steps) // every > start // every else 0
+
+
 def plan_chunk(cfg: TrainConfig, epoch: int) -> ChunkPlan:
-    """The schedules of Skew-Fit (scene-VAE) and ROLL (LSTM, appendix "Training schedules")."""
+    """The schedules of Skew-Fit (scene-VAE) and ROLL (LSTM, appendix "Training schedules"),
+    and of the goal-latent refresh: every `refresh_every_epochs` epochs when the LSTM trained
+    since the last one, and whenever the scene-VAE trained where it encodes the goal frames."""
     start = epoch * cfg.epoch_env_steps
     end = start + cfg.epoch_env_steps
     learn = end >= cfg.sac.learning_starts
-    lstm_batches = 0
-    if goal_encoder(cfg).lstm:
-        every, batches = cfg.lstm.online_batches(start)
-        # Train when the epoch crosses a multiple of `every` env steps.
-        if end // every > start // every:
-            lstm_batches = batches
+    vae_batches = vae_schedule(cfg.vae_schedule, epoch)
+    k = cfg.refresh_every_epochs
+    lstm_trained = any(_lstm_batches(cfg, e) for e in range(max(0, epoch - k + 1), epoch + 1))
+    refresh = ((epoch + 1) % k == 0 and lstm_trained) or (
+        vae_batches > 0 and goal_encoder(cfg).object_cfg is None)
     return ChunkPlan(learn=jnp.bool_(learn), act_random=jnp.bool_(start < cfg.sac.learning_starts),
-                     vae_batches=jnp.int32(vae_schedule(cfg.vae_schedule, epoch)),
-                     lstm_batches=jnp.int32(lstm_batches))
+                     vae_batches=jnp.int32(vae_batches),
+                     lstm_batches=jnp.int32(_lstm_batches(cfg, epoch)),
+                     refresh_goals=jnp.bool_(refresh))
 
 
 # ----------------------------------------------------------------------------- init
@@ -105,10 +122,12 @@ def init_state(key, cfg: TrainConfig, env, scene_vae: encoders.VAEState, lstm) -
     """A fresh seed: new SAC nets, given (pretrained) scene-VAE and LSTM, empty buffer."""
     enc = goal_encoder(cfg)
     k_sac, k_env, k_run = jax.random.split(key, 3)
-    sac_state = sac.init_sac(k_sac, cfg.scene.latent_dim, enc.goal_dim, env.action_size, cfg.sac)
-    buffer = replay.init_buffer(cfg.sac.replay_capacity(cfg.horizon), cfg.horizon,
-                                cfg.scene.image_shape, env.action_size, cfg.scene.latent_dim,
-                                enc.goal_dim)
+    obs_dim, goal_dim, frame_dim = latent_dims(enc, env)
+    sac_state = sac.init_sac(k_sac, obs_dim, goal_dim, env.action_size, cfg.sac)
+    # The oracle stores no images (a 1x1 placeholder keeps one buffer layout).
+    image_shape = (1, 1, 3) if enc.oracle else cfg.scene.image_shape
+    buffer = replay.init_buffer(cfg.sac.replay_capacity(cfg.horizon), cfg.horizon, image_shape,
+                                env.action_size, obs_dim, goal_dim, frame_dim)
     starts = jax.vmap(env.reset)(jax.random.split(k_env, cfg.n_envs + cfg.n_eval_goals))
     return TrainState(sac=sac_state, scene_vae=scene_vae, lstm=lstm, buffer=buffer,
                       skew_log_p=jnp.zeros(buffer.images.shape[:2], jnp.float32),
@@ -121,8 +140,39 @@ def init_state(key, cfg: TrainConfig, env, scene_vae: encoders.VAEState, lstm) -
 
 # ----------------------------------------------------------------------------- pieces
 
+ORACLE_SCALE = 0.1  # metres per oracle latent unit: positions enter the networks / 0.1 m
+
+
+def oracle_obs(env, state):
+    """The oracle's observation of one env state: hand position and object state, / 0.1 m."""
+    return jnp.concatenate([env.hand_pos(state), env.object_state(state)]) / ORACLE_SCALE
+
+
+def oracle_goal(env, state):
+    """The oracle's goal / achieved goal of one env state: the object state, / 0.1 m."""
+    return env.object_state(state) / ORACLE_SCALE
+
+
+def latent_dims(enc: GoalEncoder, env) -> tuple[int, int, int]:
+    """(observation, goal, per-frame) latent sizes."""
+    if enc.oracle:
+        return 3 + env.object_size, env.object_size, env.object_size
+    return enc.scene_cfg.latent_dim, enc.goal_dim, enc.frame_dim
+
+
 def scene_latents(cfg: TrainConfig, params, images):
     return encoders.encode_mean(params, cfg.scene, images)
+
+
+def needs_log_p(cfg: TrainConfig, enc: GoalEncoder) -> bool:
+    """Whether Skew-Fit's log p(x) of stored frames is used: skewed goals, or online scene-VAE
+    training on skewed replay images (static; the chunk skips the estimator otherwise)."""
+    return not enc.oracle and (enc.skewed_goals or cfg.vae_schedule != "none")
+
+
+def goal_bank(cfg: TrainConfig, env, key, n: int = 1024):
+    """The oracle's prior goals: n object states drawn from the task's goal space."""
+    return jax.vmap(lambda k: oracle_goal(env, env.sample_goal(k)))(jax.random.split(key, n))
 
 
 def test_goals(cfg: TrainConfig, env, enc: GoalEncoder, frozen: Frozen, scene_params,
@@ -130,6 +180,9 @@ def test_goals(cfg: TrainConfig, env, enc: GoalEncoder, frozen: Frozen, scene_pa
     """`n_eval_goals` test goals from the task's goal space: (goal env states, their goal
     images rendered at 48x48, their latents: segmented and encoded like any goal image)."""
     states = jax.vmap(env.sample_goal)(jax.random.split(key, cfg.n_eval_goals))
+    if enc.oracle:  # only the first goal image is shown (the evaluation video)
+        rgb = env.render(jax.tree.map(lambda x: x[0], states))[None]
+        return states, rgb, jax.vmap(lambda st: oracle_goal(env, st))(states)
     rgb = jax.vmap(env.render)(states)
     latents = enc.single(lstm_params, enc.frame_latents(frozen, scene_params,
                                                         enc.goal_images(frozen, rgb)))
@@ -141,16 +194,17 @@ def _concat(a, b):
 
 
 def collect_episode(cfg: TrainConfig, env, enc: GoalEncoder, frozen: Frozen, state: TrainState,
-                    key, act_random):
+                    key, act_random, bank=None):
     """One episode of all E training envs and, in the same env batch, of G = n_eval_goals
     test envs -> (env_state, replay.Trajectory [E, ...], Skew-Fit log p(x) of its scene
-    images [E, T+1], metrics incl. the test envs' final distances [G], a video of test env 0
-    [T+1, H, W, 3] and its goal image).
+    images [E, T+1] (zeros when unused, `needs_log_p`), metrics incl. the test envs' final
+    distances [G], a video of test env 0 [T+1, H, W, 3] and its goal image).
 
     The test envs start from fresh resets, chase test goals (`test_goals`) with the
     deterministic policy and are neither stored nor learned from. Sharing the batch costs G
     more envs per step but no second compiled copy of MJX's step (the largest compile), and
-    one reset serves both."""
+    one reset serves both. Each frame is encoded once (the policy's observation is the
+    stored scene latent). `bank`: the oracle's prior goals (`goal_bank`)."""
     k_reset, k_goal, k_act, k_lp, k_test = jax.random.split(key, 5)
     lstm_params = None if state.lstm is None else state.lstm.params
     scene_params = state.scene_vae.params
@@ -161,42 +215,65 @@ def collect_episode(cfg: TrainConfig, env, enc: GoalEncoder, frozen: Frozen, sta
     test_states, test_rgb, test_lat = test_goals(cfg, env, enc, frozen, scene_params,
                                                  lstm_params, k_test)
     cdf = skew_cdf(state.skew_log_p, cfg.skew_alpha, state.buffer.size) if enc.skewed_goals else None
-    goals = jnp.concatenate([fresh_goals(enc, state.buffer, cdf, lstm_params, k_goal, n_train),
-                             test_lat])
+    goals = jnp.concatenate([fresh_goals(enc, state.buffer, cdf, lstm_params, k_goal, n_train,
+                                         bank), test_lat])
     is_test = (jnp.arange(goals.shape[0]) >= n_train)[:, None]
-    rgb0 = jax.vmap(env.render)(env_state)
+    test0 = lambda es: jax.tree.map(lambda x: x[n_train], es)  # noqa: E731
+
+    def observe(es):
+        """(what the step records, the policy's observation [E+G, ds]) of the env states."""
+        if enc.oracle:
+            obs = jax.vmap(lambda st: oracle_obs(env, st))(es)
+            rec = (obs, jax.vmap(lambda st: oracle_goal(env, st))(es), env.render(test0(es)))
+            return rec, obs
+        rgb = jax.vmap(env.render)(es)
+        z = scene_latents(cfg, scene_params, rgb)
+        return (rgb, z), z
 
     def step(carry, k):
-        es, rgb = carry
-        z = scene_latents(cfg, scene_params, rgb)
+        es, z = carry
         k_pol, k_rand = jax.random.split(k)
-        a_pol = sac.select_action(state.sac.policy_params, z, goals, k_pol)
-        a_det = sac.select_action(state.sac.policy_params, z, goals, None, deterministic=True)
+        a_pol = sac.select_action(state.sac.policy_params, z, goals, k_pol, cfg=cfg.sac)
+        a_det = sac.select_action(state.sac.policy_params, z, goals, None, deterministic=True,
+                                  cfg=cfg.sac)
         a_rand = jax.random.uniform(k_rand, a_pol.shape, minval=-1.0, maxval=1.0)
         a = jnp.where(is_test, a_det, jnp.where(act_random, a_rand, a_pol))
         es = jax.vmap(env.step)(es, a)
-        rgb = jax.vmap(env.render)(es)
-        return (es, rgb), (rgb, a)
+        rec, z = observe(es)
+        return (es, z), (rec, a)
 
-    (env_state, _), (rgbs, actions) = jax.lax.scan(
-        step, (env_state, rgb0), jax.random.split(k_act, cfg.horizon))
-    all_images = jnp.concatenate([rgb0[None], rgbs], 0).swapaxes(0, 1)  # [E+G, T+1, H, W, 3]
-    images = all_images[:n_train]
+    rec0, z0 = observe(env_state)
+    (env_state, _), (recs, actions) = jax.lax.scan(
+        step, (env_state, z0), jax.random.split(k_act, cfg.horizon))
+    # Episode-major [.., T+1, ...] records of the training envs (and test env 0's video).
+    rec = jax.tree.map(lambda x0, xs: jnp.concatenate([x0[None], xs], 0), rec0, recs)
     test_final = jax.tree.map(lambda x: x[n_train:], env_state)
     env_state = jax.tree.map(lambda x: x[:n_train], env_state)
     goals = goals[:n_train]
-    goal_imgs = enc.goal_images(frozen, images)
-    frame_lat = enc.frame_latents(frozen, scene_params, goal_imgs)
-    achieved = jax.vmap(lambda f: enc.sequence(lstm_params, f))(frame_lat)
+    if enc.oracle:
+        obs, achieved, video = rec
+        obs, achieved = obs[:, :n_train].swapaxes(0, 1), achieved[:, :n_train].swapaxes(0, 1)
+        images = jnp.zeros(achieved.shape[:2] + state.buffer.images.shape[2:], jnp.uint8)
+        goal_imgs, frame_lat = images, achieved
+    else:
+        rgbs, z = rec
+        video = rgbs[:, n_train]
+        images = rgbs[:, :n_train].swapaxes(0, 1)  # [E, T+1, H, W, 3]
+        obs = z[:, :n_train].swapaxes(0, 1)
+        goal_imgs = enc.goal_images(frozen, images)
+        frame_lat = enc.frame_latents(frozen, scene_params, goal_imgs)
+        achieved = jax.vmap(lambda f: enc.sequence(lstm_params, f))(frame_lat)
     traj = replay.Trajectory(
         images=images, object_images=goal_imgs, actions=actions[:, :n_train].swapaxes(0, 1),
-        obs_latents=scene_latents(cfg, scene_params, images), goal_latents=achieved,
-        rollout_goals=goals)
-    log_p = frame_log_p(cfg, scene_params, images, k_lp)
+        obs_latents=obs, frame_latents=frame_lat, goal_latents=achieved, rollout_goals=goals)
+    if needs_log_p(cfg, enc):
+        log_p = frame_log_p(cfg, scene_params, images, k_lp)
+    else:
+        log_p = jnp.zeros(images.shape[:2], jnp.float32)
     final_dist = jnp.sum(jnp.square(achieved[:, -1] - goals), -1)
     metrics = {"rollout_latent_dist": final_dist.mean(),
                "test_distances": jax.vmap(env.goal_distance)(test_final, test_states),
-               "test_video": all_images[n_train], "test_goal_image": test_rgb[0]}
+               "test_video": video, "test_goal_image": test_rgb[0]}
     return env_state, traj, log_p, metrics
 
 
@@ -208,7 +285,8 @@ def store_episodes(state: TrainState, traj: replay.Trajectory, log_p) -> TrainSt
                          skew_log_p=state.skew_log_p.at[slots].set(log_p.astype(jnp.float32)))
 
 
-def sac_updates(cfg: TrainConfig, enc: GoalEncoder, state: TrainState, key, n_updates: int):
+def sac_updates(cfg: TrainConfig, enc: GoalEncoder, state: TrainState, key, n_updates: int,
+                bank=None):
     """`n_updates` SAC updates on HER batches; the fresh-goal share is drawn per batch by
     `fresh_goals` (the buffer does not change during the updates, so the Skew-Fit sampling
     CDF is built once)."""
@@ -217,9 +295,10 @@ def sac_updates(cfg: TrainConfig, enc: GoalEncoder, state: TrainState, key, n_up
 
     def body(s, k):
         k_goal, k_batch, k_upd = jax.random.split(k, 3)
-        fresh = fresh_goals(enc, state.buffer, cdf, lstm_params, k_goal, cfg.sac.batch_size)
+        fresh = fresh_goals(enc, state.buffer, cdf, lstm_params, k_goal, cfg.sac.batch_size,
+                            bank)
         batch = replay.sample_transitions(state.buffer, k_batch, cfg.sac.batch_size, fresh,
-                                          cfg.sac.goal_fracs)
+                                          cfg.sac.goal_fracs, cfg.reward_norm)
         s, m = sac.sac_update(s, k_upd, batch, cfg.sac)
         m["reward"] = batch.reward.mean()
         return s, m
@@ -283,14 +362,18 @@ def sample_frames(key, cdf, n: int):
     return jnp.minimum(jnp.searchsorted(cdf, u, side="right"), cdf.shape[0] - 1)
 
 
-def fresh_goals(enc: GoalEncoder, buffer: replay.ReplayBuffer, cdf, lstm_params, key, n: int):
+def fresh_goals(enc: GoalEncoder, buffer: replay.ReplayBuffer, cdf, lstm_params, key, n: int,
+                bank=None):
     """n goals for exploration and for the fresh-goal share of HER relabeling.
 
     ROLL (Algorithm 1): the object-VAE prior N(0, I) through the LSTM (`prior_goals`).
+    The oracle: object states of the task's goal space (`bank`, from `goal_bank`).
     Skew-Fit (rlkit's `custom_goal_sampler`): achieved-goal latents of buffer frames drawn
     with probability p(x)^alpha (`cdf` from `skew_cdf`; the cached latents are refreshed with
     the VAE); the scene-VAE prior N(0, I) while the buffer is still empty.
     """
+    if enc.oracle:
+        return bank[jax.random.randint(key, (n,), 0, bank.shape[0])]
     if not enc.skewed_goals:
         return enc.prior_goals(key, lstm_params, n)
     k_prior, k_buf = jax.random.split(key)
@@ -323,18 +406,17 @@ def train_scene_vae(cfg: TrainConfig, state: TrainState, key, n_batches):
 
 
 def lstm_online_batch(cfg: TrainConfig, enc: GoalEncoder, frozen: Frozen, scene_params, key,
-                      goal_images):
-    """Inputs of one online LSTM step for trajectories of goal images [B, T, H, W, 3]: their
-    frame latents [B, T, d] and, unless the matching loss is ablated, one occluded frame per
-    trajectory (encoders.Occlusion; else None)."""
-    lat = enc.frame_latents(frozen, scene_params, goal_images)
+                      frame_latents, goal_images):
+    """Inputs of one online LSTM step for trajectories with cached frame latents [B, T, d] and
+    goal images [B, T, H, W, 3]: the latents and, unless the matching loss is ablated, one
+    occluded frame per trajectory, encoded now (encoders.Occlusion; else None)."""
     if not cfg.matching_loss:
-        return lat, None
+        return frame_latents, None
     if enc.object_cfg is not None:
         params, frame_cfg = frozen.object_vae, enc.object_cfg
     else:
         params, frame_cfg = scene_params, enc.scene_cfg
-    return lat, encoders.make_occlusion(key, params, frame_cfg, goal_images, cfg.lstm)
+    return frame_latents, encoders.make_occlusion(key, params, frame_cfg, goal_images, cfg.lstm)
 
 
 def train_lstm(cfg: TrainConfig, enc: GoalEncoder, frozen: Frozen, state: TrainState, key,
@@ -347,7 +429,7 @@ def train_lstm(cfg: TrainConfig, enc: GoalEncoder, frozen: Frozen, state: TrainS
         k_s, k_occ, k_step = jax.random.split(jax.random.fold_in(key, i), 3)
         tr = replay.sample_trajectories(s.buffer, k_s, cfg.lstm.online_batch_size)
         lat, occ = lstm_online_batch(cfg, enc, frozen, s.scene_vae.params, k_occ,
-                                     tr.object_images)
+                                     tr.frame_latents, tr.object_images)
         ls, m = encoders.lstm_train_step(s.lstm, k_step, lat, cfg.lstm, occ)
         return s.replace(lstm=ls), loss + m["loss"]
 
@@ -355,15 +437,27 @@ def train_lstm(cfg: TrainConfig, enc: GoalEncoder, frozen: Frozen, state: TrainS
     return state, {"lstm_loss": loss_sum / jnp.maximum(n_batches, 1)}
 
 
-def refresh(cfg: TrainConfig, enc: GoalEncoder, frozen: Frozen, state: TrainState):
-    """Recompute the cached scene and goal latents of the whole buffer."""
+REFRESH_CHUNK = 64  # episodes encoded at a time when the buffer's latents are recomputed
+
+
+def refresh_scene(cfg: TrainConfig, enc: GoalEncoder, state: TrainState):
+    """After scene-VAE training: the buffer's scene latents, and its frame latents where the
+    scene-VAE encodes the goal frames (the same images: no-object-VAE, Skew-Fit)."""
+    params = state.scene_vae.params
+    buf = replay.recompute(state.buffer, "obs_latents", lambda x: scene_latents(cfg, params, x),
+                           state.buffer.images, REFRESH_CHUNK)
+    if enc.object_cfg is None:
+        buf = buf.replace(frame_latents=buf.obs_latents)
+    return state.replace(buffer=buf)
+
+
+def refresh_goals(enc: GoalEncoder, state: TrainState):
+    """The buffer's goal latents from its cached frame latents (the LSTM over each episode;
+    no image is encoded: the frame latents change only with `refresh_scene`)."""
     lstm_params = None if state.lstm is None else state.lstm.params
-    scene_params = state.scene_vae.params
-    buf = replay.refresh_latents(
-        state.buffer,
-        lambda imgs: scene_latents(cfg, scene_params, imgs),
-        lambda gimgs: enc.sequence(lstm_params, enc.frame_latents(frozen, scene_params, gimgs)),
-        chunk=64)
+    buf = replay.recompute(state.buffer, "goal_latents",
+                           lambda f: jax.vmap(lambda e: enc.sequence(lstm_params, e))(f),
+                           state.buffer.frame_latents, REFRESH_CHUNK)
     return state.replace(buffer=buf)
 
 
@@ -380,10 +474,12 @@ def make_chunk(cfg: TrainConfig, env):
 
     def chunk(state: TrainState, frozen: Frozen, plan: ChunkPlan):
         TRACE_COUNTS["chunk"] += 1
-        key, k_col, k_sac, k_vae, k_lstm = jax.random.split(state.key, 5)
+        key, k_col, k_sac, k_vae, k_lstm, k_bank = jax.random.split(state.key, 6)
+        bank = goal_bank(cfg, env, k_bank) if enc.oracle else None
 
         def episode(s, k):
-            es, traj, log_p, m = collect_episode(cfg, env, enc, frozen, s, k, plan.act_random)
+            es, traj, log_p, m = collect_episode(cfg, env, enc, frozen, s, k, plan.act_random,
+                                                 bank)
             s = store_episodes(s, traj, log_p).replace(
                 env_state=es, env_steps=s.env_steps + cfg.n_envs * cfg.horizon)
             return s, m
@@ -398,24 +494,31 @@ def make_chunk(cfg: TrainConfig, env):
         metrics = jax.tree.map(jnp.mean, col_m)
 
         zero_sac = jax.tree.map(jnp.zeros_like, jax.eval_shape(
-            lambda s: sac_updates(cfg, enc, s, k_sac, 1)[1], state))
+            lambda s: sac_updates(cfg, enc, s, k_sac, 1, bank)[1], state))
         state, sac_m = jax.lax.cond(plan.learn,
-                                    lambda s: sac_updates(cfg, enc, s, k_sac, n_updates),
+                                    lambda s: sac_updates(cfg, enc, s, k_sac, n_updates, bank),
                                     lambda s: (s, zero_sac), state)
         metrics.update(sac_m)
 
-        state, vae_m = jax.lax.cond(plan.vae_batches > 0,
-                                    lambda s: train_scene_vae(cfg, s, k_vae, plan.vae_batches),
-                                    lambda s: (s, {"vae_loss": jnp.float32(0)}), state)
-        metrics.update(vae_m)
+        if enc.oracle or cfg.vae_schedule == "none":  # no online scene-VAE training
+            metrics["vae_loss"] = jnp.float32(0)
+        else:
+            def vae_round(s):
+                s, m = train_scene_vae(cfg, s, k_vae, plan.vae_batches)
+                return refresh_scene(cfg, enc, s), m
+
+            state, vae_m = jax.lax.cond(plan.vae_batches > 0, vae_round,
+                                        lambda s: (s, {"vae_loss": jnp.float32(0)}), state)
+            metrics.update(vae_m)
         if enc.lstm:
             state, lstm_m = jax.lax.cond(
                 plan.lstm_batches > 0,
                 lambda s: train_lstm(cfg, enc, frozen, s, k_lstm, plan.lstm_batches),
                 lambda s: (s, {"lstm_loss": jnp.float32(0)}), state)
             metrics.update(lstm_m)
-        state = jax.lax.cond((plan.vae_batches > 0) | (plan.lstm_batches > 0),
-                             lambda s: refresh(cfg, enc, frozen, s), lambda s: s, state)
+        if not enc.oracle:
+            state = jax.lax.cond(plan.refresh_goals, lambda s: refresh_goals(enc, s),
+                                 lambda s: s, state)
         state = state.replace(key=key, epoch=state.epoch + 1, last_train={
             k: metrics[k].astype(jnp.float32) for k in train_metric_keys(cfg)})
         return state, {"train": metrics, "eval": evaluation}

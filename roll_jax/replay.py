@@ -2,11 +2,11 @@
 
 Whole episodes are stored at fixed shapes [n_traj, T(+1), ...] in a ring of trajectories, so
 that (a) the LSTM can be trained on and re-run over whole trajectories, (b) the cached latents
-of every stored image can be recomputed after the scene-VAE / LSTM change (`refresh_latents`),
+of every stored image can be recomputed after the scene-VAE / LSTM change (`recompute`),
 and (c) 'future' goals come from later steps of the same episode. Why not flashbax: docs/replay.md.
 
 Every function is pure and jittable (donate the buffer when jitting `add_trajectories` and
-`refresh_latents`: the image arrays are the big part of the train state).
+`recompute`: the image arrays are the big part of the train state).
 """
 
 from __future__ import annotations
@@ -27,6 +27,9 @@ class Trajectory:
     object_images: jax.Array  # uint8 [E, T+1, H, W, 3] segmented object images (rgb * mask)
     actions: jax.Array  # float32 [E, T, A]
     obs_latents: jax.Array  # float32 [E, T+1, ds] scene-VAE latents (cache)
+    # float32 [E, T+1, df] per-frame latents the LSTM runs on (object-VAE means; cache: they
+    # change only with the encoder that made them, never for the frozen object-VAE)
+    frame_latents: jax.Array
     goal_latents: jax.Array  # float32 [E, T+1, dg] achieved object latents, LSTM output (cache)
     rollout_goals: jax.Array  # float32 [E, dg] the goal the episode was collected with
 
@@ -37,6 +40,7 @@ class ReplayBuffer:
     object_images: jax.Array  # uint8 [N, T+1, H, W, 3]
     actions: jax.Array  # float32 [N, T, A]
     obs_latents: jax.Array  # float32 [N, T+1, ds]
+    frame_latents: jax.Array  # float32 [N, T+1, df]
     goal_latents: jax.Array  # float32 [N, T+1, dg]
     rollout_goals: jax.Array  # float32 [N, dg]
     insert_pos: jax.Array  # int32: next trajectory slot to write
@@ -59,12 +63,14 @@ class SampleIndices:
     future_t: jax.Array  # 'future' goal step, t < future_t <= T (used by the future rows only)
 
 
-_TRAJ_FIELDS = ("images", "object_images", "actions", "obs_latents", "goal_latents", "rollout_goals")
+_TRAJ_FIELDS = ("images", "object_images", "actions", "obs_latents", "frame_latents",
+                "goal_latents", "rollout_goals")
 
 
 def init_buffer(capacity_traj: int, horizon: int, image_shape: Sequence[int], action_dim: int,
-                obs_dim: int, goal_dim: int) -> ReplayBuffer:
-    """Empty buffer of `capacity_traj` episodes of `horizon` steps (SACConfig.replay_capacity)."""
+                obs_dim: int, goal_dim: int, frame_dim: int | None = None) -> ReplayBuffer:
+    """Empty buffer of `capacity_traj` episodes of `horizon` steps (SACConfig.replay_capacity);
+    frame_dim defaults to goal_dim (the LSTM reconstructs its input)."""
     if capacity_traj <= 0 or horizon <= 0:
         raise ValueError(f"capacity_traj and horizon must be positive, got {capacity_traj}, {horizon}")
     n, t1 = capacity_traj, horizon + 1
@@ -73,6 +79,7 @@ def init_buffer(capacity_traj: int, horizon: int, image_shape: Sequence[int], ac
         object_images=jnp.zeros((n, t1, *image_shape), jnp.uint8),
         actions=jnp.zeros((n, horizon, action_dim), jnp.float32),
         obs_latents=jnp.zeros((n, t1, obs_dim), jnp.float32),
+        frame_latents=jnp.zeros((n, t1, goal_dim if frame_dim is None else frame_dim), jnp.float32),
         goal_latents=jnp.zeros((n, t1, goal_dim), jnp.float32),
         rollout_goals=jnp.zeros((n, goal_dim), jnp.float32),
         insert_pos=jnp.zeros((), jnp.int32),
@@ -99,26 +106,16 @@ def add_trajectories(buffer: ReplayBuffer, traj: Trajectory) -> ReplayBuffer:
     )
 
 
-def refresh_latents(buffer: ReplayBuffer, obs_encode_fn: Callable, goal_encode_fn: Callable,
-                    chunk: int) -> ReplayBuffer:
-    """Recompute the cached latents of every stored episode, `chunk` episodes at a time.
-
-    obs_encode_fn: uint8 [T+1, H, W, 3] scene images -> [T+1, ds] (any batched image encoder);
-    goal_encode_fn: uint8 [T+1, H, W, 3] object images of one episode -> [T+1, dg] (object-VAE
-    then the LSTM over the episode). Both are vmapped over `chunk` episodes inside a lax.map, so
-    peak memory is one chunk of activations. Unfilled slots keep their values.
-    """
-    def encode(imgs):
-        scene, obj = imgs
-        return obs_encode_fn(scene), goal_encode_fn(obj)
-
-    obs_lat, goal_lat = jax.lax.map(encode, (buffer.images, buffer.object_images),
-                                    batch_size=min(chunk, buffer.capacity))
-    filled = (jnp.arange(buffer.capacity) < buffer.size)[:, None, None]
-    return buffer.replace(
-        obs_latents=jnp.where(filled, obs_lat.astype(jnp.float32), buffer.obs_latents),
-        goal_latents=jnp.where(filled, goal_lat.astype(jnp.float32), buffer.goal_latents),
-    )
+def recompute(buffer: ReplayBuffer, field: str, fn: Callable, source: jax.Array,
+              chunk: int) -> ReplayBuffer:
+    """buffer.<field>[i] = fn(source[i]) for every filled episode slot i (`source`: one of the
+    buffer's per-episode arrays, e.g. buffer.images), `chunk` episodes at a time (fn vmapped
+    over them inside a lax.map, so peak memory is one chunk of activations). Unfilled slots
+    keep their values."""
+    old = getattr(buffer, field)
+    new = jax.lax.map(fn, source, batch_size=min(chunk, buffer.capacity))
+    filled = (jnp.arange(buffer.capacity) < buffer.size).reshape((-1,) + (1,) * (old.ndim - 1))
+    return buffer.replace(**{field: jnp.where(filled, new.astype(old.dtype), old)})
 
 
 def goal_counts(batch_size: int, fracs: Sequence[float]) -> tuple[int, int, int]:
@@ -140,14 +137,16 @@ def draw_indices(buffer: ReplayBuffer, key, batch_size: int) -> SampleIndices:
                          future_t=future_t.astype(jnp.int32))
 
 
-def relabel(buffer: ReplayBuffer, idx: SampleIndices, prior_goals, fracs: Sequence[float]) -> Transition:
+def relabel(buffer: ReplayBuffer, idx: SampleIndices, prior_goals, fracs: Sequence[float],
+            reward_norm: str = "squared") -> Transition:
     """Build the relabeled batch at `idx` (deterministic given the draws).
 
     Rows [0, n_rollout) keep the episode's rollout goal, the next n_prior rows take
     `prior_goals` ([B, dg], sampled by the caller from the object-VAE prior and encoded by the
     LSTM; only those rows are read), the rest the achieved goal at `future_t` of the same episode.
     The draws are i.i.d., so assigning sources by row position is as good as at random.
-    Reward r = -||goal_latents[t+1] - g||^2, unscaled (SAC applies reward_scale). done = 0: the
+    Reward r = -||goal_latents[t+1] - g||^2 (reward_norm "squared") or -||.|| ("l2"), unscaled
+    (SAC applies reward_scale). done = 0: the
     episodes end by time limit, so the critic bootstraps through the last step (as rlkit).
     """
     b = idx.t.shape[0]
@@ -161,21 +160,28 @@ def relabel(buffer: ReplayBuffer, idx: SampleIndices, prior_goals, fracs: Sequen
                      jnp.where((row < n_rollout + n_prior)[:, None], prior_goals.astype(jnp.float32),
                                future_g))
     achieved_next = buffer.goal_latents[idx.traj, idx.t + 1]
+    sq = jnp.sum(jnp.square(achieved_next - goal), axis=-1)
+    if reward_norm == "squared":
+        reward = -sq
+    elif reward_norm == "l2":
+        reward = -jnp.sqrt(sq)
+    else:
+        raise ValueError(f"reward_norm must be 'squared' or 'l2', got {reward_norm!r}")
     return Transition(
         obs=buffer.obs_latents[idx.traj, idx.t],
         goal=goal,
         action=buffer.actions[idx.traj, idx.t],
-        reward=-jnp.sum(jnp.square(achieved_next - goal), axis=-1),
+        reward=reward,
         next_obs=buffer.obs_latents[idx.traj, idx.t + 1],
         done=jnp.zeros((b,), jnp.float32),
     )
 
 
 def sample_transitions(buffer: ReplayBuffer, key, batch_size: int, prior_goals,
-                       fracs: Sequence[float]) -> Transition:
+                       fracs: Sequence[float], reward_norm: str = "squared") -> Transition:
     """HER batch: `draw_indices` then `relabel`. fracs = (rollout, prior, future), e.g.
     SACConfig.goal_fracs. Needs a non-empty buffer (the loop samples after learning_starts)."""
-    return relabel(buffer, draw_indices(buffer, key, batch_size), prior_goals, fracs)
+    return relabel(buffer, draw_indices(buffer, key, batch_size), prior_goals, fracs, reward_norm)
 
 
 def sample_trajectories(buffer: ReplayBuffer, key, n: int) -> Trajectory:

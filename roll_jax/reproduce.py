@@ -68,7 +68,7 @@ def parse_args(argv=None):
     p.add_argument("--preset", required=True, help=f"one of {', '.join(PRESETS)}")
     p.add_argument("--out", required=True)
     p.add_argument("--tasks", nargs="+", default=list(TASKS), metavar="TASK")
-    p.add_argument("--algos", nargs="+", default=list(ALGOS), metavar="ALGO")
+    p.add_argument("--algos", nargs="+", default=["roll", "skewfit"], metavar="ALGO")
     p.add_argument("--ablations", action="store_true",
                    help=f"also ROLL without matching loss / LSTM / object-VAE on {ABLATION_TASK}")
     p.add_argument("--seeds", type=int, default=None,

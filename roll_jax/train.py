@@ -137,7 +137,9 @@ def setup(cfg: TrainConfig, env, key, out: str, seg_ckpt=None, enc_ckpt=None, pr
                 cfg, env, seg_ckpt or os.path.join(out, "segmentation"), k_seg)
     enc_path = enc_ckpt or os.path.join(out, "encoders")
     with times("pretrain"):
-        if os.path.exists(os.path.join(enc_path, "meta.json")):
+        if enc.oracle:  # no encoders: the untrained scene-VAE only fills the state's slot
+            pre = pretrain.initial(cfg, k_pre)
+        elif os.path.exists(os.path.join(enc_path, "meta.json")):
             pre = pretrain.load(enc_path, cfg)
         else:
             pre, _ = pretrain.pretrain(cfg, env, seg, k_pre, progress=progress,

@@ -22,6 +22,7 @@ def _trajs(e, first_id):
         object_images=jnp.broadcast_to(jnp.asarray(img + 100), (e, T + 1, HW, HW, 3)),
         actions=jnp.asarray(ids[:, None, None] + np.zeros((e, T, A), np.float32)),
         obs_latents=jnp.asarray(rng.normal(size=(e, T + 1, DS)), jnp.float32),
+        frame_latents=jnp.asarray(rng.normal(size=(e, T + 1, DG)), jnp.float32),
         goal_latents=jnp.asarray(rng.normal(size=(e, T + 1, DG)), jnp.float32),
         rollout_goals=jnp.asarray(rng.normal(size=(e, DG)), jnp.float32),
     )
@@ -57,7 +58,7 @@ def test_ring_insertion_wraps_and_size_saturates():
         replay.add_trajectories(buf, t.replace(actions=jnp.zeros((2, T + 1, A))))
 
 
-def test_refresh_latents_updates_filled_slots_only():
+def test_recompute_updates_filled_slots_only():
     buf = add(_buffer(), _trajs(4, 0))
     sentinel = -7.0
     buf = buf.replace(obs_latents=jnp.full_like(buf.obs_latents, sentinel),
@@ -73,7 +74,12 @@ def test_refresh_latents_updates_filled_slots_only():
         return jnp.stack([run, -run], axis=1)
 
     # chunk = 4 does not divide CAP = 6: exercises lax.map's remainder path.
-    new = jax.jit(replay.refresh_latents, static_argnums=(1, 2, 3))(buf, obs_enc, goal_enc, 4)
+    @jax.jit
+    def refresh(b):
+        b = replay.recompute(b, "obs_latents", obs_enc, b.images, 4)
+        return replay.recompute(b, "goal_latents", goal_enc, b.object_images, 4)
+
+    new = refresh(buf)
     px = np.asarray(buf.images[..., 0, 0, 0], np.float32)  # [CAP, T+1]
     np.testing.assert_allclose(new.obs_latents[:4], np.repeat(px[:4, :, None], DS, 2), rtol=1e-6)
     opx = np.asarray(buf.object_images[..., 0, 0, 0], np.float32)
@@ -116,6 +122,10 @@ def test_her_relabeling_matches_numpy_reference():
     for k, v in ref.items():
         np.testing.assert_allclose(getattr(batch, k), v, rtol=1e-5, atol=1e-6, err_msg=k)
     np.testing.assert_array_equal(batch.done, 0.0)
+    # The reference code's reward: the norm, not its square.
+    l2 = jax.jit(replay.sample_transitions, static_argnums=(2, 4, 5))(buf, key, b, prior, FRACS,
+                                                                       "l2")
+    np.testing.assert_allclose(l2.reward, -np.sqrt(-ref["reward"]), rtol=1e-5, atol=1e-6)
     # Exact counts by source: rollout rows equal their episode's rollout goal, etc.
     n_r, n_p, n_f = replay.goal_counts(b, FRACS)
     assert (n_r, n_p, n_f) == (10, 25, 15)

@@ -101,7 +101,8 @@ def test_store_episodes_writes_log_p_to_the_ring_slots():
             images=jnp.zeros((2, T1, HW, HW, 3), jnp.uint8),
             object_images=jnp.zeros((2, T1, HW, HW, 3), jnp.uint8),
             actions=jnp.broadcast_to(ids[:, None, None], (2, T, A)),
-            obs_latents=jnp.zeros((2, T1, DG)), goal_latents=jnp.zeros((2, T1, DG)),
+            obs_latents=jnp.zeros((2, T1, DG)), frame_latents=jnp.zeros((2, T1, DG)),
+            goal_latents=jnp.zeros((2, T1, DG)),
             rollout_goals=jnp.zeros((2, DG)))
         state = store(state, traj, jnp.broadcast_to(-ids[:, None], (2, T1)))
     np.testing.assert_array_equal(state.buffer.actions[:, 0, 0], [5, 1, 2, 3, 4])
@@ -137,7 +138,9 @@ def _lstm_loss(cfg, enc, lstm_params, vae_params, images):
     """The online LSTM loss as train_lstm builds it (lstm_online_batch + lstm_train_step's
     loss), differentiable in the LSTM and in the frame encoder's parameters."""
     frozen = Frozen(seg=None, object_vae=vae_params if enc.object_cfg is not None else None)
-    lat, occ = loop.lstm_online_batch(cfg, enc, frozen, vae_params, jax.random.PRNGKey(5), images)
+    frame_lat = enc.frame_latents(frozen, vae_params, images)  # the buffer's cached latents
+    lat, occ = loop.lstm_online_batch(cfg, enc, frozen, vae_params, jax.random.PRNGKey(5),
+                                      frame_lat, images)
     return losses.lstm_loss(lstm_params, encoders.lstm_model(cfg.lstm), lat,
                             None if occ is None else occ.latent, None if occ is None else occ.t,
                             matching_coef=cfg.lstm.matching_coef, ae_coef=cfg.lstm.ae_coef,

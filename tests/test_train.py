@@ -9,6 +9,7 @@ import jax
 import numpy as np
 import pytest
 
+from configs.sac import SACConfig
 from configs.segmentation import segmentation_config
 from configs.train import make_config
 from roll_jax import loop, sharding, train
@@ -142,11 +143,18 @@ def test_reproduce_trains_a_real_cell(runs, tmp_path):
     ({"n_envs": 3}, "must be a multiple of n_envs \\* horizon"),
     ({"algo": "skewfit", "use_lstm": False}, "--no-lstm ablate ROLL; they contradict --algo skewfit"),
     ({"use_lstm": False, "use_object_vae": False}, "--no-lstm and --no-object-vae together"),
+    ({"algo": "oracle", "matching_loss": False}, "contradict --algo oracle"),
+    ({"total_env_steps": 5000}, "learning_starts=10000 is not below total_env_steps=5000"),
+    ({"eval_every_epochs": 50}, "eval_every_epochs=50 is longer than the run .* 40 epochs"),
+    ({"sac": SACConfig(replay_size=400)}, "replay_size=400 is smaller than one chunk "
+                                          "\\(epoch_env_steps=500\\)"),
+    ({"reward_norm": "l1"}, "unknown reward_norm 'l1'"),
 ])
 def test_config_rejects_bad_values(kw, msg):
     from configs.train import TrainConfig
 
-    base = {"task": "puck_push", "algo": "roll", "preset": "smoke", "horizon": 50, "total_env_steps": 1000}
+    base = {"task": "puck_push", "algo": "roll", "preset": "smoke", "horizon": 50,
+            "total_env_steps": 20000}
     with pytest.raises(ValueError, match=msg):
         TrainConfig(**{**base, **kw})
 

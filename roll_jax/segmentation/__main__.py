@@ -18,7 +18,7 @@ import time
 
 def parse_args(argv=None):
     import envs_mjx
-    from configs.segmentation import PRESETS
+    from configs.presets import PRESETS
 
     p = argparse.ArgumentParser(prog="python -m roll_jax.segmentation", description=__doc__,
                                 formatter_class=argparse.RawTextHelpFormatter)

@@ -1,0 +1,118 @@
+"""Presets: named sets of overrides over the paper's tagged values (the defaults of every config).
+
+- `paper`: nothing overridden; the paper's sizes and schedules (GPU-sized: 300k-400k env
+  steps, SAC 400-300 at batch 1024).
+- `cpu`: sized by measurement for a 2-core CPU (docs/training.md, "The cpu preset"): the
+  paper's method and loss weights, smaller networks, batches and run, a frozen-after-pretraining
+  scene-VAE for ROLL, cached latents refreshed on a schedule. Each departure says why.
+- `smoke`: the whole path end to end in minutes (tests, `reproduce --preset smoke`); far too
+  short to learn.
+
+Each preset maps a config group to field overrides: "train" (TrainConfig), "sac", "scene_vae",
+"object_vae" (VAEConfig), "lstm", "segmentation", "rollout" (train.py --algo random) and
+"occlusion" (the defaults of `python -m roll_jax.analysis occlusion`).
+The values are plain data; configs/train.py and configs/segmentation.py apply them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import types
+from collections.abc import Mapping
+
+GROUPS = ("train", "sac", "scene_vae", "object_vae", "lstm", "segmentation", "rollout",
+          "occlusion")
+
+
+@dataclasses.dataclass(frozen=True)
+class Preset:
+    name: str
+    doc: str
+    groups: Mapping[str, Mapping]
+
+    def __post_init__(self):
+        unknown = set(self.groups) - set(GROUPS)
+        if unknown:
+            raise ValueError(f"preset {self.name!r}: unknown group(s) {sorted(unknown)}; "
+                             f"expected some of {GROUPS}")
+        object.__setattr__(self, "groups", types.MappingProxyType(
+            {g: types.MappingProxyType(dict(self.groups.get(g, {}))) for g in GROUPS}))
+
+    def __getitem__(self, group: str) -> Mapping:
+        return self.groups[group]
+
+
+PAPER = Preset("paper", "the paper's values (appendix tables); GPU-sized", {
+    "rollout": {"n_envs": 64, "episodes": 4, "video_size": 128},
+    "occlusion": {"n_train": 500, "n_eval": 200, "lstm_steps": 10000, "vae_steps": 5000},
+})
+
+CPU = Preset("cpu", "sized for a 2-core CPU: learns puck pushing within a session", {
+    "train": {
+        "total_env_steps": 50_000,  # paper 300k-400k: what fits a session on 2 cores
+        "n_eval_goals": 8,  # paper 32 per evaluation: the test envs step beside the 10 training envs
+        "eval_every_epochs": 4,  # every 2k env steps (the evaluation runs in every chunk anyway)
+        # The scene-VAE is trained in pretraining only (paper: online on rlkit's schedule):
+        # re-encoding a 50k-frame buffer after each round costs more than the SAC updates.
+        "vae_schedule": "none",
+        "skew_num_latents": 4,  # paper 10: Skew-Fit's log p(x) per stored frame, 4 decodes
+        "refresh_every_epochs": 4,  # cached LSTM latents of the buffer recomputed every 2k steps
+    },
+    "sac": {
+        "hidden": (128, 128),  # paper 400-300: ~8x fewer FLOPs per update
+        "batch_size": 256,  # paper 1024
+        "replay_size": 50_000,  # paper 100k: the run is 50k env steps
+        "learning_starts": 2_000,  # paper 10k: 1/25 of the run, as 10k is of 250k
+    },
+    "scene_vae": {
+        "epochs": 40,  # paper 2000 x 25 batches: 1000 steps
+        "batch_size": 64,
+        "n_pretrain_images": 2000,
+    },
+    "object_vae": {
+        "epochs": 40,  # paper 2000 x 25 batches: 1000 steps (not collapsed: docs/analysis.md)
+        "batch_size": 64,  # paper 128; the KL keeps the paper's beta / 128 (kl_reference_batch)
+        "n_pretrain_images": 2000,
+    },
+    "lstm": {
+        "epochs": 20,  # paper 2000 x 25 batches: 500 steps
+        "batch_size": 32,  # paper 128
+        "online_batch_size": 16,  # paper 25 (the reference code: 16)
+        # paper (5k, 500, 80), (50k, 500, 20), then (1000, 20): a quarter of the batches
+        "online_schedule": ((5_000, 500, 20), (2**62, 1000, 10)),
+    },
+    "segmentation": {
+        "n_frames": 1000,  # paper 2000/4000 MOG2 frames
+        "unet_features": 8,  # width 8 (the hurdles' and pickup's paper-preset width)
+        "unet_epochs": 8,  # paper 30
+        "eval_states": 256,  # paper 500
+    },
+    "rollout": {"n_envs": 8, "episodes": 2, "video_size": 128},
+    "occlusion": {"n_train": 200, "n_eval": 100, "lstm_steps": 2000, "vae_steps": 1000},
+})
+
+SMOKE = Preset("smoke", "the whole path in minutes (tests); learns nothing", {
+    # Two chunks (3 evaluations: 0, 500, 1000 env steps).
+    "train": {"total_env_steps": 1000, "epoch_env_steps": 500, "eval_every_epochs": 1,
+              "n_eval_goals": 4, "vae_schedule": "smoke", "skew_num_latents": 2},
+    "sac": {"hidden": (32, 32), "batch_size": 64, "replay_size": 2_000, "learning_starts": 200},
+    # 50 VAE pre-training steps on batches of 32.
+    "scene_vae": {"epochs": 10, "batches_per_epoch": 5, "batch_size": 32, "n_pretrain_images": 200},
+    "object_vae": {"epochs": 10, "batches_per_epoch": 5, "batch_size": 32, "n_pretrain_images": 200},
+    "lstm": {"epochs": 10, "batches_per_epoch": 5, "batch_size": 16, "online_batch_size": 4,
+             "online_schedule": ((2**62, 500, 2),)},
+    "segmentation": {"n_frames": 300, "n_envs": 30, "unet_features": 8, "unet_epochs": 3,
+                     "eval_states": 64},
+    "rollout": {"n_envs": 4, "episodes": 1, "video_size": 128},
+    "occlusion": {"n_train": 64, "n_eval": 64, "lstm_steps": 200, "vae_steps": 200},
+})
+
+_ALL = {p.name: p for p in (SMOKE, CPU, PAPER)}
+PRESETS = tuple(_ALL)
+
+
+def get(name: str) -> Preset:
+    """The preset called `name`; ValueError naming the known ones otherwise."""
+    if name not in _ALL:
+        raise ValueError(f"unknown preset {name!r}; expected one of {', '.join(PRESETS)}")
+    return _ALL[name]

@@ -1,0 +1,82 @@
+"""Presets live in configs/presets.py: every CLI takes each of them, and they mean the same
+thing everywhere (no module keeps a copy)."""
+
+import importlib.util
+import os
+import sys
+
+import pytest
+
+from configs import presets
+from configs.segmentation import segmentation_config
+from configs.train import TASKS, make_config
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def test_every_preset_builds_every_task_and_algo():
+    for name in presets.PRESETS:
+        for task in TASKS:
+            for algo in ("roll", "skewfit", "oracle"):
+                cfg = make_config(task, algo, name)
+                assert cfg.preset == name
+
+
+def test_preset_values_reach_the_configs():
+    cpu = presets.get("cpu")
+    cfg = make_config("puck_push", "roll", "cpu")
+    for group, fields in (("sac", cfg.sac), ("scene_vae", cfg.scene_vae),
+                          ("object_vae", cfg.object_vae), ("lstm", cfg.lstm),
+                          ("segmentation", cfg.segmentation)):
+        for k, v in cpu[group].items():
+            assert getattr(fields, k) == v, (group, k)
+    for k, v in cpu["train"].items():
+        assert getattr(cfg, k) == v, k
+    # The paper preset overrides nothing: the tagged defaults.
+    paper = make_config("puck_push", "roll", "paper")
+    assert paper.sac.hidden == (400, 300) and paper.total_env_steps == 300_000
+    assert segmentation_config("puck_push", "cpu").n_frames == cpu["segmentation"]["n_frames"]
+    # The cpu preset's smaller VAE batches keep the paper's per-image KL weight.
+    assert cfg.object_vae.effective_beta == paper.object_vae.effective_beta == 20.0 / 128
+    assert cfg.scene_vae.effective_beta == paper.scene_vae.effective_beta == 20.0 / 64
+
+
+def test_unknown_preset_names_the_known_ones():
+    with pytest.raises(ValueError, match="unknown preset 'gpu'; expected one of smoke, cpu, paper"):
+        presets.get("gpu")
+    with pytest.raises(ValueError, match="unknown group"):
+        presets.Preset("x", "", {"trian": {}})
+
+
+@pytest.fixture
+def train_cli(monkeypatch):
+    spec = importlib.util.spec_from_file_location("train_cli", os.path.join(ROOT, "train.py"))
+    mod = importlib.util.module_from_spec(spec)
+    monkeypatch.setitem(sys.modules, "train_cli", mod)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_every_cli_takes_preset_cpu_and_lists_the_presets(train_cli, tmp_path, capsys):
+    from roll_jax import analysis, pretrain, reproduce
+    from roll_jax.segmentation import __main__ as seg_cli
+
+    _, cfg, _ = train_cli.parse_args(["--preset", "cpu", "--devices", "1",
+                                      "--out", str(tmp_path / "r")])
+    assert cfg.preset == "cpu"
+    _, rollout, _ = train_cli.parse_args(["--algo", "random", "--preset", "cpu",
+                                          "--out", str(tmp_path / "v")])
+    assert rollout.n_envs == presets.get("cpu")["rollout"]["n_envs"]
+    reproduce.main(["--preset", "cpu", "--tasks", "puck_push", "--out", str(tmp_path / "g"),
+                    "--dry-run"])
+    for main, argv in ((train_cli.parse_args, []), (pretrain.main, ["--task", "puck_push",
+                                                                    "--out", str(tmp_path)]),
+                       (reproduce.main, ["--out", str(tmp_path)]),
+                       (seg_cli.main, ["--task", "puck_push", "--out", str(tmp_path)]),
+                       (analysis.main, ["latent-vs-distance", "--task", "puck_push",
+                                        "--ckpt", str(tmp_path)])):
+        capsys.readouterr()
+        with pytest.raises(SystemExit):
+            main(argv + ["--preset", "gpu"])
+        err = capsys.readouterr().err
+        assert "gpu" in err and all(name in err for name in presets.PRESETS), (main, err)
