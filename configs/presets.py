@@ -57,6 +57,9 @@ CPU = Preset("cpu", "sized for a 2-core CPU: learns puck pushing within a sessio
         "vae_schedule": "none",
         "skew_num_latents": 4,  # paper 10: Skew-Fit's log p(x) per stored frame, 4 decodes
         "refresh_every_epochs": 4,  # cached LSTM latents of the buffer recomputed every 2k steps
+        # The reference code's reward (-||z' - z_g||, LSTM_wrapped_env.py); the paper writes
+        # the square. The oracle learns with the norm (docs/training.md).
+        "reward_norm": "l2",
     },
     "sac": {
         "hidden": (128, 128),  # paper 400-300: ~8x fewer FLOPs per update
