@@ -82,6 +82,9 @@ def parse_args(argv=None):
     p.add_argument("--devices", default="all",
                    help="'all' or N: shard the seed axis over that many devices (seeds must be "
                         "divisible by it; 1 = unsharded)")
+    p.add_argument("--compile-cache", default=None, metavar="DIR|off",
+                   help="persistent JAX compilation cache (default: $ROLL_JAX_CACHE or "
+                        "~/.cache/roll_jax/jax): a second run of a config skips its compiles")
     p.add_argument("--seed-batch", default="auto",
                    help="'auto' or N: seeds vmapped side by side per device, the rest run one "
                         "group after the other (auto: 1 on CPU, all on GPU/TPU)")
@@ -195,8 +198,10 @@ def main(argv=None) -> int:
             json.dump(dataclasses.asdict(cfg), f, indent=2)
         print(json.dumps(run_random(cfg), indent=2))
         return 0
-    from roll_jax import train
+    from roll_jax import compile_cache, train
 
+    if a.compile_cache != "off":
+        compile_cache.use(a.compile_cache or compile_cache.default_dir())
     t0 = time.time()
     rows = train.run(cfg, out, resume=a.resume, seg_ckpt=a.seg_ckpt, enc_ckpt=a.enc_ckpt,
                      seed=a.seed, devices=a.devices, seed_batch=a.seed_batch)

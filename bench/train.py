@@ -58,6 +58,7 @@ import jax
 import jax.numpy as jnp
 
 import envs_mjx
+from configs.presets import PRESETS
 from configs.train import make_config
 from roll_jax import encoders, loop, sac, sharding
 from roll_jax.agent import Frozen, goal_encoder
@@ -137,10 +138,11 @@ def _time_part(name: str, fn, args, reps: int, min_time: float = 1.0) -> dict:
 
 def make_cfg(a, seeds: int):
     base = make_config(a.task, "roll", a.preset)
-    sac_cfg = base.sac if a.replay_size is None else dataclasses.replace(
-        base.sac, replay_size=a.replay_size)
+    # Learning from the first chunk (the timed plan is the steady state anyway).
+    sac_cfg = dataclasses.replace(base.sac, learning_starts=0, replay_size=(
+        base.sac.replay_size if a.replay_size is None else a.replay_size))
     return make_config(a.task, "roll", a.preset, seeds=seeds, n_envs=a.n_envs,
-                       epoch_env_steps=a.epoch_env_steps,
+                       epoch_env_steps=a.epoch_env_steps, eval_every_epochs=1,
                        total_env_steps=a.epoch_env_steps * a.chunks, sac=sac_cfg)
 
 
@@ -230,7 +232,7 @@ def part_functions(cfg, env, frozen):
 
             def step(_, zk):
                 z, kk = zk
-                return None, sac.select_action(policy_params, z, g, kk)
+                return None, sac.select_action(policy_params, z, g, kk, cfg=cfg.sac)
 
             return None, jax.lax.scan(step, None, (z_ep, jax.random.split(k, t)))[1]
 
@@ -277,7 +279,8 @@ def bench_seeds(a, seeds: int, env) -> dict:
     _block(state)
     plan = loop.ChunkPlan(learn=jnp.bool_(True), act_random=jnp.bool_(False),
                           vae_batches=jnp.int32(a.vae_batches),
-                          lstm_batches=jnp.int32(a.lstm_batches))
+                          lstm_batches=jnp.int32(a.lstm_batches),
+                          refresh_goals=jnp.bool_(a.lstm_batches > 0 or a.vae_batches > 0))
     steps_per_chunk = seeds * cfg.epoch_env_steps
     n_updates = cfg.epoch_env_steps * cfg.sac.updates_per_step
     print(f"\n== {cfg.task}, {seeds} seed(s): {cfg.n_envs} envs x {cfg.episodes_per_epoch} "
@@ -415,7 +418,7 @@ def main(argv=None):
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--task", default="puck_push", choices=envs_mjx.TASK_NAMES)
     p.add_argument("--seeds", type=int, nargs="+", default=[1, 6])
-    p.add_argument("--preset", default="paper", choices=("paper", "smoke"))
+    p.add_argument("--preset", default="paper", choices=PRESETS)
     p.add_argument("--epoch-env-steps", type=int, default=None,
                    help="env steps per seed per chunk, a multiple of n_envs x horizon "
                    "(default: the preset's, 500 for paper)")

@@ -27,10 +27,17 @@ TASKS = ("puck_push", "hurdle_bottom", "hurdle_top", "door_open", "pickup")
 # distance as reward (no images encoded): a check of SAC, HER and the loop themselves.
 ALGOS = ("roll", "skewfit", "oracle")
 REWARD_NORMS = ("squared", "l2")
+SAC_SCHEDULES = ("epoch", "step")
 
 # rlkit vae_schedules (Skew-Fit appendix C.5): epoch -> (train?, batches); "none": the scene-VAE
 # is trained in pretraining only (the cpu preset's ROLL).
 VAE_SCHEDULES = ("custom_schedule", "custom_schedule_2", "smoke", "none")
+
+
+# The string-valued TrainConfig fields and what each may be.
+CHOICES = {"vae_schedule": VAE_SCHEDULES, "scene_pretrain_data": ("random_policy", "goals"),
+           "reward_norm": REWARD_NORMS, "prior_goals": ("standard", "buffer"),
+           "sac_schedule": SAC_SCHEDULES}
 
 
 def vae_schedule(name: str, epoch: int) -> int:
@@ -70,12 +77,26 @@ class TrainConfig:
     skew_num_latents: int = 10  # rlkit Skew-Fit priority: importance samples per image
     vae_schedule: str = "custom_schedule_2"  # Skew-Fit appendix C.5 (rlkit vae_schedules)
     vae_online_batch: int = 64  # Table 3: scene-VAE batch size
+    # Scene-VAE pretraining images: "random_policy" ("Training schedules": a random policy's
+    # frames) or "goals" (states set to random goals: the reference code's push and hurdle
+    # launch files, oracle_dataset_using_set_to_goal=True); per task in configs/<task>.py.
+    scene_pretrain_data: str = "random_policy"
     # The buffer's cached goal latents (LSTM outputs) are recomputed after online encoder
     # training every this many epochs (1: after each training, as rlkit refreshes its latents).
     refresh_every_epochs: int = 1
     # Reward -||z' - z_g||^2 ("squared", the paper's equation) or -||z' - z_g|| ("l2", the
     # reference code's LSTM_wrapped_env.py ~l.303).
     reward_norm: str = "squared"
+    # When SAC updates: "epoch", all updates_per_step x epoch_env_steps of them after the
+    # epoch's collection (rlkit's order, which Skew-Fit and ROLL ran); "step", n_envs x
+    # updates_per_step after every vectorised env step (the same number per transition, the
+    # policy fresher while it collects).
+    sac_schedule: str = "epoch"
+    # ROLL's prior goals (exploration and HER's prior share): "standard", N(0, I) through the
+    # LSTM (Algorithm 1; the reference launch files' sample_from_true_prior=True); "buffer",
+    # N(mean, std) of the stored frame latents (rlkit's dist_mu / dist_std, the reference
+    # code's sample_from_true_prior=False).
+    prior_goals: str = "standard"
     # Ablations (paper section "Ablations"), flags on --algo roll.
     matching_loss: bool = True
     use_lstm: bool = True
@@ -106,9 +127,10 @@ class TrainConfig:
         if self.total_env_steps % self.epoch_env_steps:
             raise ValueError(f"TrainConfig.total_env_steps={self.total_env_steps} must be a "
                              f"multiple of epoch_env_steps={self.epoch_env_steps}")
-        if self.reward_norm not in REWARD_NORMS:
-            raise ValueError(f"unknown reward_norm {self.reward_norm!r}; expected one of "
-                             f"{', '.join(REWARD_NORMS)}")
+        for name, allowed in CHOICES.items():
+            if getattr(self, name) not in allowed:
+                raise ValueError(f"unknown {name} {getattr(self, name)!r}; expected one of "
+                                 f"{', '.join(allowed)}")
         if self.sac.learning_starts >= self.total_env_steps:
             raise ValueError(f"sac.learning_starts={self.sac.learning_starts} is not below "
                              f"total_env_steps={self.total_env_steps}: the run would never learn")
@@ -118,9 +140,6 @@ class TrainConfig:
         if self.sac.replay_size < self.epoch_env_steps:
             raise ValueError(f"sac.replay_size={self.sac.replay_size} is smaller than one chunk "
                              f"(epoch_env_steps={self.epoch_env_steps})")
-        if self.vae_schedule not in VAE_SCHEDULES:
-            raise ValueError(f"unknown vae_schedule {self.vae_schedule!r}; expected one of "
-                             f"{VAE_SCHEDULES}")
         ablated = [n for n, on in (("--no-matching-loss", not self.matching_loss),
                                    ("--no-lstm", not self.use_lstm),
                                    ("--no-object-vae", not self.use_object_vae)) if on]
@@ -135,9 +154,6 @@ class TrainConfig:
                 which = "scene" if not self.use_object_vae else "object"
                 raise ValueError(f"lstm.out_dim={self.lstm.out_dim} must equal the {which}-VAE "
                                  f"latent size {frame.latent_dim}: the LSTM reconstructs its input")
-        if self.sac.replay_size < self.horizon:
-            raise ValueError(f"replay_size={self.sac.replay_size} holds no whole episode of "
-                             f"horizon {self.horizon}")
 
     @property
     def n_epochs(self) -> int:
@@ -168,6 +184,16 @@ def _task_module(task: str):
     return importlib.import_module(f"configs.{task}")
 
 
+def _object_vae(task: str, over) -> VAEConfig:
+    """object_vae_config with a preset's overrides; "matching_coef_factor" scales the task's
+    Table 2 VAE matching coefficient (the cpu preset's)."""
+    over = dict(over)
+    factor = over.pop("matching_coef_factor", None)
+    if factor is not None:
+        over["matching_coef"] = factor * object_vae_config(task).matching_coef
+    return object_vae_config(task, **over)
+
+
 def make_config(task: str, algo: str = "roll", preset: str = "paper", **overrides) -> TrainConfig:
     """The config of `task` x `algo` x `preset`; keyword overrides win (nested configs are
     replaced whole: pass e.g. sac=dataclasses.replace(cfg.sac, batch_size=256))."""
@@ -178,7 +204,7 @@ def make_config(task: str, algo: str = "roll", preset: str = "paper", **override
         segmentation=segmentation_config(task, preset),
         scene_vae=scene_vae_config(task, "skewfit" if algo == "skewfit" else "roll",
                                    **pre["scene_vae"]),
-        object_vae=object_vae_config(task, **pre["object_vae"]),
+        object_vae=_object_vae(task, pre["object_vae"]),
         lstm=lstm_config(task, **pre["lstm"]),
         sac=SACConfig(**pre["sac"]),
     )

@@ -84,9 +84,12 @@ class GoalEncoder:
         flat = frame_latents.reshape((-1, 1, frame_latents.shape[-1]))
         return lstm_encode(lstm_params, flat)[:, 0].reshape(frame_latents.shape[:-1] + (-1,))
 
-    def prior_goals(self, key, lstm_params, n: int):
-        """n goals from the frame encoder's prior N(0, I), encoded like a goal frame."""
+    def prior_goals(self, key, lstm_params, n: int, stats=None):
+        """n goals from the frame encoder's prior N(0, I) (or N(mean, std) with
+        `stats` = (mean, std)), encoded like a goal frame."""
         z = jax.random.normal(key, (n, self.frame_dim), jnp.float32)
+        if stats is not None:
+            z = stats[0] + stats[1] * z
         return self.single(lstm_params, z)
 
 

@@ -121,8 +121,9 @@ def observation_set(env, key, n: int):
     """N observations with the object uniform in its goal space and the hand uniform in its
     box (kinematic `env.place`, rendered), and one goal from `env.sample_goal`.
 
-    Returns (obs_rgb uint8 [n, 48, 48, 3], goal_rgb uint8 [48, 48, 3], distances [n]) where
-    distances = env.goal_distance(obs, goal) (metres, radians for the door)."""
+    Returns (obs_rgb uint8 [n, 48, 48, 3], goal_rgb uint8 [48, 48, 3], distances [n],
+    object states [n, k]) where distances = env.goal_distance(obs, goal) (metres, radians for
+    the door) and the object states are `env.object_state`."""
     from roll_jax.segmentation.pipeline import random_placement
 
     k_goal, k_obs = jax.random.split(key)
@@ -133,13 +134,32 @@ def observation_set(env, key, n: int):
 
         def one(k):
             st = random_placement(env, *jax.random.split(k))
-            return env.render(st), env.goal_distance(st, goal)
+            return env.render(st), env.goal_distance(st, goal), env.object_state(st)
 
-        rgb, dist = jax.vmap(one)(keys)
-        return rgb, env.render(goal), dist
+        rgb, dist, pos = jax.vmap(one)(keys)
+        return rgb, env.render(goal), dist, pos
 
-    rgb, goal_rgb, dist = run(k_goal, jax.random.split(k_obs, n))
-    return np.asarray(rgb), np.asarray(goal_rgb), np.asarray(dist)
+    rgb, goal_rgb, dist, pos = run(k_goal, jax.random.split(k_obs, n))
+    return np.asarray(rgb), np.asarray(goal_rgb), np.asarray(dist), np.asarray(pos)
+
+
+def position_r2(latents, positions) -> float:
+    """R^2 of a least-squares affine fit of the object states [n, k] from latents [n, d]
+    (all coordinates pooled): how linearly the latents encode where the object is."""
+    z = np.asarray(latents, np.float64)
+    y = np.asarray(positions, np.float64)
+    x = np.concatenate([z, np.ones((len(z), 1))], 1)
+    coef, *_ = np.linalg.lstsq(x, y, rcond=None)
+    return float(1.0 - np.sum((x @ coef - y) ** 2) / np.sum((y - y.mean(0)) ** 2))
+
+
+def pairwise_spearman(latents, positions, max_n: int = 300) -> float:
+    """Spearman of latent distance vs object-state distance over all pairs of the first
+    `max_n` observations."""
+    z = np.asarray(latents, np.float64)[:max_n]
+    y = np.asarray(positions, np.float64)[:max_n]
+    i, j = np.triu_indices(len(z), 1)
+    return spearman(np.linalg.norm(y[i] - y[j], axis=-1), np.linalg.norm(z[i] - z[j], axis=-1))
 
 
 def latent_distances(encode: Callable, obs_rgb, goal_rgb) -> np.ndarray:
@@ -235,6 +255,11 @@ def _scene_encode(params, cfg, rgb):
 def _object_encode(enc: GoalEncoder, frozen, scene_params, lstm_params, rgb):
     frames = enc.frame_latents(frozen, scene_params, enc.goal_images(frozen, rgb))
     return enc.single(lstm_params, frames)
+
+
+@functools.partial(jax.jit, static_argnames=("enc",))
+def _frame_encode(enc: GoalEncoder, frozen, scene_params, rgb):
+    return enc.frame_latents(frozen, scene_params, enc.goal_images(frozen, rgb))
 
 
 def model_encoders(cfg, pre, seg, chunk: int = 512) -> tuple[Callable, Callable]:
@@ -401,7 +426,7 @@ def _finetune_vae(state, key, images, masks, cfg, n_steps: int, batch: int):
     return jax.lax.scan(body, state, jax.random.split(key, n_steps))
 
 
-def finetune_vae(key, state: encoders.VAEState, cfg, images, masks, n_steps: int,
+def finetune_vae(key, state: encoders.ModelState, cfg, images, masks, n_steps: int,
                  batch: int | None = None, chunk: int = 100):
     """`n_steps` object-VAE steps (its config's loss: beta-VAE + VAE matching) on frames
     [N, 48, 48, 3] with object masks [N, 48, 48]. Returns (state, losses [n_steps])."""
@@ -555,15 +580,26 @@ def run_latent_vs_distance(task: str, ckpt: str, out: str, n: int = 500, seed: i
 
     cfg, pre, seg = load_checkpoint(ckpt, task, preset)
     env = envs_mjx.make(task)
-    obs, goal, dist = observation_set(env, jax.random.PRNGKey(seed), n)
+    obs, goal, dist, pos = observation_set(env, jax.random.PRNGKey(seed), n)
     encode_scene, encode_object = model_encoders(cfg, pre, seg)
     res = latent_vs_distance(obs, goal, dist, encode_scene, encode_object)
+    # The object-VAE itself, on these held-out segmented images: its means against the
+    # object's state (position; door: angle).
+    enc = goal_encoder(cfg)
+    frozen = Frozen(seg=seg, object_vae=pre.object_vae.params)
+    means = _batched(lambda x: _frame_encode(enc, frozen, pre.scene_vae.params, x), obs, 512)
+    scene = encode_scene(obs)  # what the policy sees must locate the object too
+    probe = {"object_vae_r2": position_r2(means, pos),
+             "object_vae_pairwise_spearman": pairwise_spearman(means, pos),
+             "object_vae_latent_std": [round(float(v), 4) for v in np.std(means, 0)],
+             "scene_vae_r2": position_r2(scene, pos),
+             "scene_vae_latent_std": [round(float(v), 4) for v in np.std(scene, 0)]}
     x_label, x_scale = _units(env)
     png, js = write_latent_vs_distance(res, out, task, x_label, x_scale,
                                        extra={"preset": cfg.preset, "ckpt": os.path.abspath(ckpt),
-                                              "seed": seed})
+                                              "seed": seed, **probe})
     summary = {k: res[k] for k in ("n", "spearman_object", "spearman_scene")}
-    return {**summary, "task": task, "png": png, "json": js}
+    return {**summary, **probe, "task": task, "png": png, "json": js}
 
 
 def run_occlusion(ckpt: str, out: str, task: str = "hurdle_top", n_train: int = 64,

@@ -34,14 +34,9 @@ from roll_jax.models import (
 
 
 @flax.struct.dataclass
-class VAEState:
-    params: Any
-    opt_state: Any
-    step: jax.Array
+class ModelState:
+    """A trained model (VAE or LSTM): parameters, Adam state, steps taken."""
 
-
-@flax.struct.dataclass
-class LSTMState:
     params: Any
     opt_state: Any
     step: jax.Array
@@ -84,12 +79,12 @@ def _adam(lr: float) -> optax.GradientTransformation:
 # this init ~3x faster on CPU: rbg gives other parameters under vmap and across backends, so
 # seed i of a vmapped run would not equal the same seed run alone.)
 @functools.partial(jax.jit, static_argnums=(1, 2, 3))
-def _init_vae(key: jax.Array, model: ConvVAE, image_shape: tuple[int, ...], lr: float) -> VAEState:
+def _init_vae(key: jax.Array, model: ConvVAE, image_shape: tuple[int, ...], lr: float) -> ModelState:
     params = model.init(key, jnp.zeros((1,) + image_shape, jnp.uint8), key)
-    return VAEState(params=params, opt_state=_adam(lr).init(params), step=jnp.zeros((), jnp.int32))
+    return ModelState(params=params, opt_state=_adam(lr).init(params), step=jnp.zeros((), jnp.int32))
 
 
-def init_vae(key: jax.Array, cfg: VAEConfig) -> VAEState:
+def init_vae(key: jax.Array, cfg: VAEConfig) -> ModelState:
     return _init_vae(key, vae_model(cfg), cfg.image_shape, cfg.lr)
 
 
@@ -99,8 +94,8 @@ def _check_masks(masks, images) -> None:
                          f"(images without channels), got {tuple(masks.shape)}")
 
 
-def vae_train_step(state: VAEState, key: jax.Array, images: jax.Array, cfg: VAEConfig,
-                   object_masks: jax.Array | None = None) -> tuple[VAEState, dict]:
+def vae_train_step(state: ModelState, key: jax.Array, images: jax.Array, cfg: VAEConfig,
+                   object_masks: jax.Array | None = None) -> tuple[ModelState, dict]:
     """One Adam step on a batch of images [B, 48, 48, 3] uint8; adds the matching loss on
     synthetically occluded copies when cfg.matching_coef > 0 (object-VAE)."""
     check_images(images)
@@ -118,11 +113,11 @@ def vae_train_step(state: VAEState, key: jax.Array, images: jax.Array, cfg: VAEC
     grads, metrics = jax.grad(loss_fn, has_aux=True)(state.params)
     updates, opt_state = vae_optimizer(cfg).update(grads, state.opt_state, state.params)
     params = optax.apply_updates(state.params, updates)
-    return VAEState(params=params, opt_state=opt_state, step=state.step + 1), metrics
+    return ModelState(params=params, opt_state=opt_state, step=state.step + 1), metrics
 
 
-def vae_fit_epoch(state: VAEState, key: jax.Array, dataset: jax.Array, cfg: VAEConfig,
-                  object_masks: jax.Array | None = None) -> tuple[VAEState, dict]:
+def vae_fit_epoch(state: ModelState, key: jax.Array, dataset: jax.Array, cfg: VAEConfig,
+                  object_masks: jax.Array | None = None) -> tuple[ModelState, dict]:
     """cfg.batches_per_epoch steps on minibatches of cfg.batch_size drawn uniformly (with
     replacement, as rlkit does) from dataset [N, 48, 48, 3]; one lax.scan. Returns the
     per-batch metrics stacked [batches_per_epoch]."""
@@ -155,12 +150,12 @@ def decode(params: Any, cfg: VAEConfig, z: jax.Array) -> jax.Array:
 # --- LSTM -------------------------------------------------------------------------------------
 
 @functools.partial(jax.jit, static_argnums=(1, 2, 3))
-def _init_lstm(key: jax.Array, model: LSTMEncoder, in_dim: int, lr: float) -> LSTMState:
+def _init_lstm(key: jax.Array, model: LSTMEncoder, in_dim: int, lr: float) -> ModelState:
     params = init_lstm_params(key, model, in_dim)
-    return LSTMState(params=params, opt_state=_adam(lr).init(params), step=jnp.zeros((), jnp.int32))
+    return ModelState(params=params, opt_state=_adam(lr).init(params), step=jnp.zeros((), jnp.int32))
 
 
-def init_lstm(key: jax.Array, cfg: LSTMConfig, in_dim: int) -> LSTMState:
+def init_lstm(key: jax.Array, cfg: LSTMConfig, in_dim: int) -> ModelState:
     return _init_lstm(key, lstm_model(cfg), in_dim, cfg.lr)
 
 
@@ -185,8 +180,8 @@ def make_occlusion(key: jax.Array, vae_params: Any, vae_cfg: VAEConfig, images: 
     return Occlusion(t=t, latent=latent)
 
 
-def lstm_train_step(state: LSTMState, key: jax.Array, seq_latents: jax.Array, cfg: LSTMConfig,
-                    occlusion: Occlusion | None = None) -> tuple[LSTMState, dict]:
+def lstm_train_step(state: ModelState, key: jax.Array, seq_latents: jax.Array, cfg: LSTMConfig,
+                    occlusion: Occlusion | None = None) -> tuple[ModelState, dict]:
     """One Adam step on trajectories of object-VAE means seq_latents [B, T, d]: auto-encoder
     loss, plus cfg.matching_coef * matching loss when an `occlusion` is given. `key` is
     unused (kept for the uniform step signature)."""
@@ -204,11 +199,11 @@ def lstm_train_step(state: LSTMState, key: jax.Array, seq_latents: jax.Array, cf
     grads, metrics = jax.grad(loss_fn, has_aux=True)(state.params)
     updates, opt_state = lstm_optimizer(cfg).update(grads, state.opt_state, state.params)
     params = optax.apply_updates(state.params, updates)
-    return LSTMState(params=params, opt_state=opt_state, step=state.step + 1), metrics
+    return ModelState(params=params, opt_state=opt_state, step=state.step + 1), metrics
 
 
-def lstm_fit_epoch(state: LSTMState, key: jax.Array, seq_dataset: jax.Array, cfg: LSTMConfig,
-                   batches: int | None = None) -> tuple[LSTMState, dict]:
+def lstm_fit_epoch(state: ModelState, key: jax.Array, seq_dataset: jax.Array, cfg: LSTMConfig,
+                   batches: int | None = None) -> tuple[ModelState, dict]:
     """Auto-encoder pre-training: `batches` (default cfg.batches_per_epoch) steps on minibatches
     of cfg.batch_size latent sequences drawn from seq_dataset [N, T, d]; one lax.scan."""
     n = seq_dataset.shape[0]

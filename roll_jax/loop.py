@@ -25,11 +25,13 @@ runs the same chunk with true positions for latents (`oracle_obs`, `oracle_goal`
 from __future__ import annotations
 
 import collections
+import functools
 import math
 from typing import Any
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from flax import struct
 
 from configs.train import TrainConfig, vae_schedule
@@ -45,8 +47,8 @@ class TrainState:
     """Everything one seed carries from chunk to chunk (checkpointed whole)."""
 
     sac: sac.SACState
-    scene_vae: encoders.VAEState
-    lstm: Any  # encoders.LSTMState, or None without LSTM
+    scene_vae: encoders.ModelState
+    lstm: Any  # encoders.ModelState, or None without LSTM
     buffer: replay.ReplayBuffer
     # float32 [N, T+1]: Skew-Fit's log p(x) of every stored scene image under the current
     # scene-VAE (written with each episode, recomputed after each scene-VAE training), so that
@@ -104,7 +106,9 @@ def plan_chunk(cfg: TrainConfig, epoch: int) -> ChunkPlan:
     since the last one, and whenever the scene-VAE trained where it encodes the goal frames."""
     start = epoch * cfg.epoch_env_steps
     end = start + cfg.epoch_env_steps
-    learn = end >= cfg.sac.learning_starts
+    # "epoch": the updates follow the collection, so the epoch that reaches learning_starts
+    # learns; "step": they run during it, on the buffer as the epoch found it.
+    learn = (end if cfg.sac_schedule == "epoch" else start) >= cfg.sac.learning_starts
     vae_batches = vae_schedule(cfg.vae_schedule, epoch)
     k = cfg.refresh_every_epochs
     lstm_trained = any(_lstm_batches(cfg, e) for e in range(max(0, epoch - k + 1), epoch + 1))
@@ -118,7 +122,7 @@ def plan_chunk(cfg: TrainConfig, epoch: int) -> ChunkPlan:
 
 # ----------------------------------------------------------------------------- init
 
-def init_state(key, cfg: TrainConfig, env, scene_vae: encoders.VAEState, lstm) -> TrainState:
+def init_state(key, cfg: TrainConfig, env, scene_vae: encoders.ModelState, lstm) -> TrainState:
     """A fresh seed: new SAC nets, given (pretrained) scene-VAE and LSTM, empty buffer."""
     enc = goal_encoder(cfg)
     k_sac, k_env, k_run = jax.random.split(key, 3)
@@ -143,14 +147,27 @@ def init_state(key, cfg: TrainConfig, env, scene_vae: encoders.VAEState, lstm) -
 ORACLE_SCALE = 0.1  # metres per oracle latent unit: positions enter the networks / 0.1 m
 
 
+@functools.lru_cache(maxsize=None)
+def oracle_centre(env) -> np.ndarray:
+    """The mean (hand position, object state) of 256 goal states (a fixed draw): the origin
+    of the oracle's coordinates, so that the networks see centred inputs."""
+    with jax.ensure_compile_time_eval():
+        states = jax.vmap(env.sample_goal)(jax.random.split(jax.random.PRNGKey(0), 256))
+        pos = jnp.concatenate([jax.vmap(env.hand_pos)(states),
+                               jax.vmap(env.object_state)(states)], -1)
+        return np.asarray(jnp.mean(pos, 0))
+
+
 def oracle_obs(env, state):
-    """The oracle's observation of one env state: hand position and object state, / 0.1 m."""
-    return jnp.concatenate([env.hand_pos(state), env.object_state(state)]) / ORACLE_SCALE
+    """The oracle's observation of one env state: hand position and object state, centred
+    (`oracle_centre`), / 0.1 m."""
+    pos = jnp.concatenate([env.hand_pos(state), env.object_state(state)])
+    return (pos - oracle_centre(env)) / ORACLE_SCALE
 
 
 def oracle_goal(env, state):
-    """The oracle's goal / achieved goal of one env state: the object state, / 0.1 m."""
-    return env.object_state(state) / ORACLE_SCALE
+    """The oracle's goal / achieved goal of one env state: its object part of `oracle_obs`."""
+    return (env.object_state(state) - oracle_centre(env)[3:]) / ORACLE_SCALE
 
 
 def latent_dims(enc: GoalEncoder, env) -> tuple[int, int, int]:
@@ -168,6 +185,29 @@ def needs_log_p(cfg: TrainConfig, enc: GoalEncoder) -> bool:
     """Whether Skew-Fit's log p(x) of stored frames is used: skewed goals, or online scene-VAE
     training on skewed replay images (static; the chunk skips the estimator otherwise)."""
     return not enc.oracle and (enc.skewed_goals or cfg.vae_schedule != "none")
+
+
+def frame_stats(buffer: replay.ReplayBuffer):
+    """(mean, std) [d] of the stored frame latents per dimension: the data's latent
+    distribution (rlkit's dist_mu / dist_std); (0, 1) while the buffer is empty."""
+    lat = buffer.frame_latents
+    w = (jnp.arange(lat.shape[0]) < buffer.size).astype(jnp.float32)[:, None, None]
+    count = jnp.maximum(jnp.sum(w) * lat.shape[1], 1.0)
+    mean = jnp.sum(lat * w, (0, 1)) / count
+    var = jnp.sum(jnp.square(lat - mean) * w, (0, 1)) / count
+    empty = buffer.size == 0
+    return jnp.where(empty, 0.0, mean), jnp.where(empty, 1.0, jnp.sqrt(var))
+
+
+def goal_prior(cfg: TrainConfig, enc: GoalEncoder, env, buffer, key):
+    """What a chunk's prior goals are drawn from: the oracle's bank of goal-space object
+    states; the buffer's frame-latent (mean, std) for cfg.prior_goals "buffer"; None for the
+    standard normal prior (Algorithm 1)."""
+    if enc.oracle:
+        return goal_bank(cfg, env, key)
+    if cfg.prior_goals == "buffer" and not enc.skewed_goals:
+        return frame_stats(buffer)
+    return None
 
 
 def goal_bank(cfg: TrainConfig, env, key, n: int = 1024):
@@ -194,7 +234,7 @@ def _concat(a, b):
 
 
 def collect_episode(cfg: TrainConfig, env, enc: GoalEncoder, frozen: Frozen, state: TrainState,
-                    key, act_random, bank=None):
+                    key, act_random, prior=None, learn=None, eval_policy=None):
     """One episode of all E training envs and, in the same env batch, of G = n_eval_goals
     test envs -> (env_state, replay.Trajectory [E, ...], Skew-Fit log p(x) of its scene
     images [E, T+1] (zeros when unused, `needs_log_p`), metrics incl. the test envs' final
@@ -204,8 +244,15 @@ def collect_episode(cfg: TrainConfig, env, enc: GoalEncoder, frozen: Frozen, sta
     deterministic policy and are neither stored nor learned from. Sharing the batch costs G
     more envs per step but no second compiled copy of MJX's step (the largest compile), and
     one reset serves both. Each frame is encoded once (the policy's observation is the
-    stored scene latent). `bank`: the oracle's prior goals (`goal_bank`)."""
+    stored scene latent). `prior`: what prior goals are drawn from (`goal_prior`).
+
+    With cfg.sac_schedule "step", `learn` (bool) switches on n_envs x updates_per_step SAC
+    updates after every env step (on the buffer as it was at the episode's start); the test
+    envs then act with `eval_policy` (the policy the chunk started from) and the new SAC state
+    and its mean metrics come back in the metrics ("sac_state", "sac")."""
     k_reset, k_goal, k_act, k_lp, k_test = jax.random.split(key, 5)
+    interleave = cfg.sac_schedule == "step"
+    eval_policy = state.sac.policy_params if eval_policy is None else eval_policy
     lstm_params = None if state.lstm is None else state.lstm.params
     scene_params = state.scene_vae.params
     n_train = cfg.n_envs
@@ -216,7 +263,7 @@ def collect_episode(cfg: TrainConfig, env, enc: GoalEncoder, frozen: Frozen, sta
                                                  lstm_params, k_test)
     cdf = skew_cdf(state.skew_log_p, cfg.skew_alpha, state.buffer.size) if enc.skewed_goals else None
     goals = jnp.concatenate([fresh_goals(enc, state.buffer, cdf, lstm_params, k_goal, n_train,
-                                         bank), test_lat])
+                                         prior), test_lat])
     is_test = (jnp.arange(goals.shape[0]) >= n_train)[:, None]
     test0 = lambda es: jax.tree.map(lambda x: x[n_train], es)  # noqa: E731
 
@@ -230,21 +277,30 @@ def collect_episode(cfg: TrainConfig, env, enc: GoalEncoder, frozen: Frozen, sta
         z = scene_latents(cfg, scene_params, rgb)
         return (rgb, z), z
 
+    cdf_sac = _skew_cdf_of(cfg, enc, state) if interleave else None
+    zero_sac = zero_sac_metrics(cfg, enc, state, prior) if interleave else None
+    n_per_step = cfg.n_envs * cfg.sac.updates_per_step
+
     def step(carry, k):
-        es, z = carry
-        k_pol, k_rand = jax.random.split(k)
-        a_pol = sac.select_action(state.sac.policy_params, z, goals, k_pol, cfg=cfg.sac)
-        a_det = sac.select_action(state.sac.policy_params, z, goals, None, deterministic=True,
-                                  cfg=cfg.sac)
+        es, z, sac_s = carry
+        k_pol, k_rand, k_upd = jax.random.split(k, 3)
+        a_pol = sac.select_action(sac_s.policy_params, z, goals, k_pol, cfg=cfg.sac)
+        a_det = sac.select_action(eval_policy, z, goals, None, deterministic=True, cfg=cfg.sac)
         a_rand = jax.random.uniform(k_rand, a_pol.shape, minval=-1.0, maxval=1.0)
         a = jnp.where(is_test, a_det, jnp.where(act_random, a_rand, a_pol))
         es = jax.vmap(env.step)(es, a)
         rec, z = observe(es)
-        return (es, z), (rec, a)
+        sac_m = None
+        if interleave:
+            sac_s, sac_m = jax.lax.cond(
+                learn, lambda s_: sac_steps(cfg, enc, s_, state.buffer, cdf_sac, lstm_params,
+                                            k_upd, n_per_step, prior),
+                lambda s_: (s_, zero_sac), sac_s)
+        return (es, z, sac_s), (rec, a, sac_m)
 
     rec0, z0 = observe(env_state)
-    (env_state, _), (recs, actions) = jax.lax.scan(
-        step, (env_state, z0), jax.random.split(k_act, cfg.horizon))
+    (env_state, _, sac_state), (recs, actions, sac_ms) = jax.lax.scan(
+        step, (env_state, z0, state.sac), jax.random.split(k_act, cfg.horizon))
     # Episode-major [.., T+1, ...] records of the training envs (and test env 0's video).
     rec = jax.tree.map(lambda x0, xs: jnp.concatenate([x0[None], xs], 0), rec0, recs)
     test_final = jax.tree.map(lambda x: x[n_train:], env_state)
@@ -274,6 +330,9 @@ def collect_episode(cfg: TrainConfig, env, enc: GoalEncoder, frozen: Frozen, sta
     metrics = {"rollout_latent_dist": final_dist.mean(),
                "test_distances": jax.vmap(env.goal_distance)(test_final, test_states),
                "test_video": video, "test_goal_image": test_rgb[0]}
+    if interleave:
+        metrics["sac_state"] = sac_state
+        metrics["sac"] = jax.tree.map(jnp.mean, sac_ms)
     return env_state, traj, log_p, metrics
 
 
@@ -285,26 +344,47 @@ def store_episodes(state: TrainState, traj: replay.Trajectory, log_p) -> TrainSt
                          skew_log_p=state.skew_log_p.at[slots].set(log_p.astype(jnp.float32)))
 
 
-def sac_updates(cfg: TrainConfig, enc: GoalEncoder, state: TrainState, key, n_updates: int,
-                bank=None):
-    """`n_updates` SAC updates on HER batches; the fresh-goal share is drawn per batch by
-    `fresh_goals` (the buffer does not change during the updates, so the Skew-Fit sampling
-    CDF is built once)."""
-    lstm_params = None if state.lstm is None else state.lstm.params
-    cdf = skew_cdf(state.skew_log_p, cfg.skew_alpha, state.buffer.size) if enc.skewed_goals else None
+def sac_steps(cfg: TrainConfig, enc: GoalEncoder, sac_state: sac.SACState,
+              buffer: replay.ReplayBuffer, cdf, lstm_params, key, n_updates: int, prior=None):
+    """`n_updates` SAC updates on HER batches from `buffer` -> (SAC state, mean metrics); the
+    fresh-goal share is drawn per batch by `fresh_goals` (`cdf`: Skew-Fit's, or None)."""
 
     def body(s, k):
         k_goal, k_batch, k_upd = jax.random.split(k, 3)
-        fresh = fresh_goals(enc, state.buffer, cdf, lstm_params, k_goal, cfg.sac.batch_size,
-                            bank)
-        batch = replay.sample_transitions(state.buffer, k_batch, cfg.sac.batch_size, fresh,
+        fresh = fresh_goals(enc, buffer, cdf, lstm_params, k_goal, cfg.sac.batch_size, prior)
+        batch = replay.sample_transitions(buffer, k_batch, cfg.sac.batch_size, fresh,
                                           cfg.sac.goal_fracs, cfg.reward_norm)
         s, m = sac.sac_update(s, k_upd, batch, cfg.sac)
         m["reward"] = batch.reward.mean()
         return s, m
 
-    new, metrics = jax.lax.scan(body, state.sac, jax.random.split(key, n_updates))
-    return state.replace(sac=new), jax.tree.map(jnp.mean, metrics)
+    new, metrics = jax.lax.scan(body, sac_state, jax.random.split(key, n_updates))
+    return new, jax.tree.map(jnp.mean, metrics)
+
+
+def _skew_cdf_of(cfg: TrainConfig, enc: GoalEncoder, state: TrainState):
+    if not enc.skewed_goals:
+        return None
+    return skew_cdf(state.skew_log_p, cfg.skew_alpha, state.buffer.size)
+
+
+def sac_updates(cfg: TrainConfig, enc: GoalEncoder, state: TrainState, key, n_updates: int,
+                prior=None):
+    """`sac_steps` on the train state's buffer (which does not change during the updates, so
+    the Skew-Fit sampling CDF is built once)."""
+    lstm_params = None if state.lstm is None else state.lstm.params
+    new, metrics = sac_steps(cfg, enc, state.sac, state.buffer, _skew_cdf_of(cfg, enc, state),
+                             lstm_params, key, n_updates, prior)
+    return state.replace(sac=new), metrics
+
+
+def zero_sac_metrics(cfg: TrainConfig, enc: GoalEncoder, state: TrainState, prior=None):
+    """`sac_updates`' metrics of the branch that does not learn: zeros, "finite" true (no
+    update, nothing non-finite)."""
+    m = jax.tree.map(jnp.zeros_like, jax.eval_shape(
+        lambda s: sac_updates(cfg, enc, s, jax.random.PRNGKey(0), 1, prior)[1], state))
+    m["finite"] = jnp.ones_like(m["finite"])
+    return m
 
 
 def log_likelihood(cfg: TrainConfig, params, images, key):
@@ -363,19 +443,21 @@ def sample_frames(key, cdf, n: int):
 
 
 def fresh_goals(enc: GoalEncoder, buffer: replay.ReplayBuffer, cdf, lstm_params, key, n: int,
-                bank=None):
+                prior=None):
     """n goals for exploration and for the fresh-goal share of HER relabeling.
 
     ROLL (Algorithm 1): the object-VAE prior N(0, I) through the LSTM (`prior_goals`).
-    The oracle: object states of the task's goal space (`bank`, from `goal_bank`).
+    The oracle: object states of the task's goal space (`prior`, from `goal_bank`). With
+    cfg.prior_goals "buffer", ROLL's prior is N(mean, std) of the stored frame latents
+    (`prior`, from `frame_stats`).
     Skew-Fit (rlkit's `custom_goal_sampler`): achieved-goal latents of buffer frames drawn
     with probability p(x)^alpha (`cdf` from `skew_cdf`; the cached latents are refreshed with
     the VAE); the scene-VAE prior N(0, I) while the buffer is still empty.
     """
     if enc.oracle:
-        return bank[jax.random.randint(key, (n,), 0, bank.shape[0])]
+        return prior[jax.random.randint(key, (n,), 0, prior.shape[0])]
     if not enc.skewed_goals:
-        return enc.prior_goals(key, lstm_params, n)
+        return enc.prior_goals(key, lstm_params, n, prior)
     k_prior, k_buf = jax.random.split(key)
     flat = sample_frames(k_buf, cdf, n)
     t1 = buffer.goal_latents.shape[1]
@@ -455,8 +537,7 @@ def refresh_goals(enc: GoalEncoder, state: TrainState):
     """The buffer's goal latents from its cached frame latents (the LSTM over each episode;
     no image is encoded: the frame latents change only with `refresh_scene`)."""
     lstm_params = None if state.lstm is None else state.lstm.params
-    buf = replay.recompute(state.buffer, "goal_latents",
-                           lambda f: jax.vmap(lambda e: enc.sequence(lstm_params, e))(f),
+    buf = replay.recompute(state.buffer, "goal_latents", lambda e: enc.sequence(lstm_params, e),
                            state.buffer.frame_latents, REFRESH_CHUNK)
     return state.replace(buffer=buf)
 
@@ -475,11 +556,16 @@ def make_chunk(cfg: TrainConfig, env):
     def chunk(state: TrainState, frozen: Frozen, plan: ChunkPlan):
         TRACE_COUNTS["chunk"] += 1
         key, k_col, k_sac, k_vae, k_lstm, k_bank = jax.random.split(state.key, 6)
-        bank = goal_bank(cfg, env, k_bank) if enc.oracle else None
+        prior = goal_prior(cfg, enc, env, state.buffer, k_bank)
+
+        interleave = cfg.sac_schedule == "step"
+        eval_policy = state.sac.policy_params
 
         def episode(s, k):
             es, traj, log_p, m = collect_episode(cfg, env, enc, frozen, s, k, plan.act_random,
-                                                 bank)
+                                                 prior, plan.learn, eval_policy)
+            if interleave:
+                s = s.replace(sac=m.pop("sac_state"))
             s = store_episodes(s, traj, log_p).replace(
                 env_state=es, env_steps=s.env_steps + cfg.n_envs * cfg.horizon)
             return s, m
@@ -492,13 +578,13 @@ def make_chunk(cfg: TrainConfig, env):
                       "distances": dist, "video": col_m.pop("test_video")[0],
                       "goal_image": col_m.pop("test_goal_image")[0], "train": start_train}
         metrics = jax.tree.map(jnp.mean, col_m)
-
-        zero_sac = jax.tree.map(jnp.zeros_like, jax.eval_shape(
-            lambda s: sac_updates(cfg, enc, s, k_sac, 1, bank)[1], state))
-        state, sac_m = jax.lax.cond(plan.learn,
-                                    lambda s: sac_updates(cfg, enc, s, k_sac, n_updates, bank),
-                                    lambda s: (s, zero_sac), state)
-        metrics.update(sac_m)
+        if interleave:  # the updates ran inside the episodes
+            metrics.update(metrics.pop("sac"))
+        else:
+            state, sac_m = jax.lax.cond(
+                plan.learn, lambda s: sac_updates(cfg, enc, s, k_sac, n_updates, prior),
+                lambda s: (s, zero_sac_metrics(cfg, enc, s, prior)), state)
+            metrics.update(sac_m)
 
         if enc.oracle or cfg.vae_schedule == "none":  # no online scene-VAE training
             metrics["vae_loss"] = jnp.float32(0)

@@ -3,7 +3,8 @@ appendix "Training schedules").
 
     python -m roll_jax.pretrain --task TASK [--preset smoke|paper] --out DIR [--seg DIR]
 
-- scene data: `n_pretrain_images` frames of a random policy (whole episodes from resets);
+- scene data: `n_pretrain_images` frames of a random policy (whole episodes from resets), or
+  of states set to random goals (TrainConfig.scene_pretrain_data, per task);
 - object data: as many frames with the object (and the hand) placed at random, segmented
   with `segment` (never with ground-truth labels);
 - scene-VAE: beta-VAE loss; object-VAE: + the VAE matching loss; LSTM: auto-encoder loss on
@@ -40,14 +41,25 @@ CHECKPOINT_VERSION = 2
 
 @struct.dataclass
 class Pretrained:
-    scene_vae: encoders.VAEState
-    object_vae: encoders.VAEState | None
-    lstm: encoders.LSTMState | None
+    scene_vae: encoders.ModelState
+    object_vae: encoders.ModelState | None
+    lstm: encoders.ModelState | None
 
 
-def scene_dataset(env, key, n_images: int) -> jax.Array:
-    """uint8 [n, 48, 48, 3]: random-policy episodes from resets (frames after each step)."""
+def scene_dataset(env, key, n_images: int, source: str = "random_policy") -> jax.Array:
+    """uint8 [n, 48, 48, 3]: "random_policy", frames of random-policy episodes from resets
+    (after each step; the paper's text); "goals", states set to goals drawn from the task's
+    goal space (`env.sample_goal`: hand and object placed), rlkit's
+    `oracle_dataset_using_set_to_goal` that the reference code's push and hurdle launch files
+    use (TrainConfig.scene_pretrain_data)."""
     from envs_mjx.rollout import random_actions, rollout
+
+    if source == "goals":
+        rgb = jax.jit(jax.vmap(lambda k: env.render(env.sample_goal(k))))(
+            jax.random.split(key, n_images))
+        return rgb
+    if source != "random_policy":
+        raise ValueError(f"scene data source must be 'random_policy' or 'goals', got {source!r}")
 
     n_eps = -(-n_images // env.horizon)
 
@@ -156,13 +168,14 @@ def pretrain(cfg: TrainConfig, env, seg_params, key, progress: bool = True,
     k_sd, k_od, k_s, k_o, k_l = jax.random.split(key, 5)
     info = {}
     n_scene = cfg.scene.n_pretrain_images
-    sd_spec = {"task": cfg.task, "n": n_scene, "key": _key(k_sd)}
+    sd_spec = {"task": cfg.task, "n": n_scene, "key": _key(k_sd),
+               "source": cfg.scene_pretrain_data}
     data = {}
 
     def scene_data():  # built or loaded once, only when a model is (re)trained on it
         if "scene" not in data:
             data["scene"], _ = _cached(
-                cache, "scene_data", sd_spec, lambda: (scene_dataset(env, k_sd, n_scene), None),
+                cache, "scene_data", sd_spec, lambda: (scene_dataset(env, k_sd, n_scene, cfg.scene_pretrain_data), None),
                 lambda: jax.ShapeDtypeStruct((n_scene,) + cfg.scene.image_shape, jax.numpy.uint8))
             info["scene_data"] = data["scene"]
         return data["scene"]

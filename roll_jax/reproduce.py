@@ -208,12 +208,9 @@ def _use_cache(path: str) -> None:
     """JAX's persistent compilation cache in DIR/.jax_cache (unless one is configured
     already): cells of one task share their data-collection and pre-training programs, and a
     resumed grid skips its compiles."""
-    import jax
+    from roll_jax import compile_cache
 
-    if jax.config.jax_compilation_cache_dir:  # the caller's own cache (e.g. the tests') wins
-        return
-    jax.config.update("jax_compilation_cache_dir", path)
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
+    compile_cache.use(path)
 
 
 def _run_cell(cfg, out: str, resume: bool, seg_ckpt: str, seed: int, devices, seed_batch,

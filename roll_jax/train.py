@@ -50,6 +50,27 @@ class TrainingDiverged(RuntimeError):
     pass
 
 
+def check_finite(train: dict, env_steps: int, epoch: int, ckpt: str) -> None:
+    """Stop on a NaN/inf loss, or on a chunk where any SAC update had a non-finite gradient
+    (`sac_update`'s "finite" flag; the chunk reports its mean, < 1 when one was not),
+    naming the quantity, the seed and the env step. Called before the chunk's state is
+    checkpointed, so the last good checkpoint is kept."""
+    for k in LOSS_KEYS:
+        if k in train and not np.all(np.isfinite(train[k])):
+            bad = int(np.argmax(~np.isfinite(train[k])))
+            raise TrainingDiverged(
+                f"{k} is {train[k][bad]} for seed {bad} at env step {env_steps} (epoch "
+                f"{epoch}); the last good checkpoint in {ckpt} is kept")
+    if "finite" in train:
+        flag = np.asarray(train["finite"], np.float64)
+        if not np.all(flag == 1.0):  # (1 in a chunk without updates: loop.zero_sac_metrics)
+            bad = int(np.argmax(flag != 1.0))
+            raise TrainingDiverged(
+                f"a SAC gradient was NaN/inf for seed {bad} at env step {env_steps} (epoch "
+                f"{epoch}; {1.0 - flag[bad]:.0%} of its updates); the last good checkpoint in "
+                f"{ckpt} is kept")
+
+
 class PhaseTimes:
     """Wall and process-CPU seconds (all threads) per phase of a run, for timings.json;
     `with times("name"):` adds one entry to the phase's list."""
@@ -360,13 +381,7 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
             state, metrics = chunk(state, frozen, plan)
             metrics = shd.to_host(metrics)
         env_steps = (epoch + 1) * cfg.epoch_env_steps
-        for k in LOSS_KEYS:
-            m = metrics["train"]
-            if k in m and not np.all(np.isfinite(m[k])):
-                bad = int(np.argmax(~np.isfinite(m[k])))
-                raise TrainingDiverged(
-                    f"{k} is {m[k][bad]} for seed {bad} at env step {env_steps} (epoch "
-                    f"{epoch}); the last good checkpoint in {os.path.join(out, 'ckpt')} is kept")
+        check_finite(metrics["train"], env_steps, epoch, os.path.join(out, "ckpt"))
         if epoch % cfg.eval_every_epochs == 0:
             log_evaluation(epoch * cfg.epoch_env_steps, metrics["eval"])
         if (epoch + 1) % cfg.eval_every_epochs == 0 or epoch + 1 == cfg.n_epochs:

@@ -54,6 +54,21 @@ def _read_index(images):
     return images[:, 0, 0, 0].astype(int) + 256 * images[:, 0, 0, 1].astype(int)
 
 
+def test_position_probe_tells_an_encoding_from_noise():
+    rng = np.random.default_rng(0)
+    pos = rng.uniform(-0.1, 0.1, (400, 2))
+    mix = rng.normal(size=(2, 6))
+    good = pos @ mix + 0.001 * rng.normal(size=(400, 6))  # a linear code of the position
+    noise = rng.normal(size=(400, 6))
+    assert analysis.position_r2(good, pos) > 0.99
+    assert analysis.position_r2(noise, pos) < 0.1
+    assert analysis.pairwise_spearman(good, pos) > 0.9  # (the code is anisotropic)
+    assert abs(analysis.pairwise_spearman(noise, pos)) < 0.1
+    # A monotone but non-linear code still ranks (Spearman) but fits worse (R^2).
+    warped = np.concatenate([np.tanh(pos * 30), pos[:, :1] * 0], 1)
+    assert analysis.pairwise_spearman(warped, pos) > 0.8
+
+
 def test_latent_vs_distance_monotone_object_latent(tmp_path):
     rng = np.random.default_rng(1)
     n = 60

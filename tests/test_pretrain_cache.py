@@ -31,7 +31,7 @@ def built(monkeypatch):
     """Counts what is built; the datasets are random images of the right shape."""
     counts = {"scene_data": 0, "object_data": 0, "vae": 0, "lstm": 0}
 
-    def scene_dataset(env, key, n):
+    def scene_dataset(env, key, n, source="random_policy"):
         counts["scene_data"] += 1
         return jax.random.randint(key, (n, 48, 48, 3), 0, 256).astype(jnp.uint8)
 
@@ -81,3 +81,17 @@ def test_cache_shares_what_matches_and_rebuilds_the_rest(built, tmp_path):
     assert built["object_data"] == 2 and built["scene_data"] == 1
     fresh, _ = pretrain.pretrain(tiny(), None, seg, key, progress=False)
     assert built["scene_data"] == 2 and _equal(fresh, first)
+
+
+def test_scene_data_from_goals_are_rendered_goal_states():
+    import envs_mjx
+
+    env = envs_mjx.make("puck_push")
+    key = jax.random.PRNGKey(3)
+    data = pretrain.scene_dataset(env, key, 4, "goals")
+    want = jax.jit(jax.vmap(lambda k: env.render(env.sample_goal(k))))(jax.random.split(key, 4))
+    np.testing.assert_array_equal(data, want)
+    assert data.shape == (4, 48, 48, 3) and data.dtype == jnp.uint8
+    assert len({np.asarray(x).tobytes() for x in data}) == 4  # four different goal states
+    with pytest.raises(ValueError, match="'random_policy' or 'goals', got 'expert'"):
+        pretrain.scene_dataset(env, key, 4, "expert")

@@ -61,7 +61,7 @@ def _args(out, *extra):
     (["--set", "use_lstm=False"], "--set use_lstm: the grid sets these itself"),
     (["--report-only", "--dry-run"], "--report-only and --dry-run contradict"),
     (["--seeds", "0"], "--seeds must be >= 1"),
-    (["--set", "sac.replay_size=10"], "replay_size=10 holds no whole episode"),
+    (["--set", "sac.replay_size=10"], "replay_size=10 is smaller than one chunk"),
     (["--set", "nonsense=1"], "unknown config field"),
     (["--devices", "0"], "'all' or a positive integer"),
 ])

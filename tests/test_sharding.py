@@ -189,7 +189,8 @@ def test_sharded_equals_unsharded(two_device_runs):
             continue
         for s in range(x.shape[0]):
             diff = np.linalg.norm(x[s].astype(np.float64) - y[s])
-            assert diff <= 0.25 * np.linalg.norm(y[s].astype(np.float64)) + 1e-6, (k, s)
+            # Relative, with an absolute floor for leaves near zero (biases that started at 0).
+            assert diff <= 0.25 * np.linalg.norm(y[s].astype(np.float64)) + 1e-2, (k, s)
 
 
 def test_resume_on_other_device_count(two_device_runs):

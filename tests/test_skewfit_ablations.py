@@ -89,6 +89,31 @@ def test_fresh_goals_fall_back_to_prior_per_seed():
                                   PRIOR.prior_goals(key, None, 8))
 
 
+def test_buffer_prior_matches_the_stored_frame_latents():
+    """prior_goals "buffer": N(mean, std) of the filled slots' frame latents (rlkit's
+    dist_mu / dist_std); N(0, 1) while the buffer is empty."""
+    rng = np.random.default_rng(0)
+    lat = rng.normal([2.0, -1.0], [0.5, 3.0], (CAP, T1, DG)).astype(np.float32)
+    lat[3:] = 100.0  # unfilled slots: ignored
+    buf = replay.init_buffer(CAP, T, (HW, HW, 3), A, DG, DG).replace(
+        frame_latents=jnp.asarray(lat), size=jnp.int32(3))
+    mean, std = jax.jit(loop.frame_stats)(buf)
+    np.testing.assert_allclose(mean, lat[:3].reshape(-1, DG).mean(0), rtol=1e-5)
+    np.testing.assert_allclose(std, lat[:3].reshape(-1, DG).std(0), rtol=1e-5)
+    empty = jax.jit(loop.frame_stats)(buf.replace(size=jnp.int32(0)))
+    np.testing.assert_array_equal(empty[0], 0.0)
+    np.testing.assert_array_equal(empty[1], 1.0)
+    goals = np.asarray(PRIOR.prior_goals(jax.random.PRNGKey(0), None, 20000, (mean, std)))
+    np.testing.assert_allclose(goals.mean(0), mean, atol=0.05)
+    np.testing.assert_allclose(goals.std(0), std, rtol=0.03)
+    cfg = make_config("puck_push", "roll", "smoke", prior_goals="buffer")
+    assert loop.goal_prior(cfg, goal_encoder(cfg), None, buf, None) is not None
+    assert loop.goal_prior(make_config("puck_push", "roll", "smoke"), goal_encoder(cfg), None,
+                           buf, None) is None
+    with pytest.raises(ValueError, match="unknown prior_goals 'data'"):
+        make_config("puck_push", "roll", "smoke", prior_goals="data")
+
+
 def test_store_episodes_writes_log_p_to_the_ring_slots():
     state = loop.TrainState(sac=None, scene_vae=None, lstm=None,
                             buffer=replay.init_buffer(CAP, T, (HW, HW, 3), A, DG, DG),
@@ -209,7 +234,7 @@ def test_object_vae_matching_gradient(variant, data):
     else:
         assert all(v == 0 for v in norms.values())
     _, m = jax.jit(encoders.vae_train_step, static_argnames="cfg")(
-        encoders.VAEState(data["object"], encoders.vae_optimizer(ocfg).init(data["object"]),
+        encoders.ModelState(data["object"], encoders.vae_optimizer(ocfg).init(data["object"]),
                           jnp.int32(0)), jax.random.PRNGKey(3), imgs, cfg=ocfg)
     assert ("matching" in m) == (variant == "roll")
 

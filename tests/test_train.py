@@ -188,3 +188,15 @@ def test_read_rows_keeps_int_columns(tmp_path):
     with open(path, "w", newline="") as f:
         f.write(legacy)
     assert train.read_rows(path, 1000, final=True) == written
+
+
+def test_check_finite_stops_on_a_nan_gradient_with_finite_losses():
+    ok = {"q_loss": np.array([0.1, 0.2]), "policy_loss": np.array([1.0, 1.0]),
+          "finite": np.array([1.0, 1.0])}
+    train.check_finite(ok, 500, 0, "/ckpt")
+    bad_grad = {**ok, "finite": np.array([1.0, 0.999])}  # one update of seed 1 out of 1000
+    with pytest.raises(train.TrainingDiverged, match="SAC gradient was NaN/inf for seed 1 at "
+                                                     "env step 500 .* /ckpt is kept"):
+        train.check_finite(bad_grad, 500, 0, "/ckpt")
+    with pytest.raises(train.TrainingDiverged, match="q_loss is nan for seed 0 at env step 1000"):
+        train.check_finite({**ok, "q_loss": np.array([np.nan, 0.1])}, 1000, 1, "/ckpt")

@@ -1,0 +1,32 @@
+"""JAX's persistent compilation cache: a second run of the same config loads its compiled
+programs (the training chunk is the largest: about a minute to compile on a 2-core CPU).
+
+`train.py` uses `default_dir()` unless `--compile-cache off` (or a directory) is given; the
+reproduction grid keeps its own in DIR/.jax_cache. A cache configured earlier in the process
+(e.g. by the test suite) is left as it is.
+"""
+
+from __future__ import annotations
+
+import os
+
+
+def default_dir() -> str:
+    """$ROLL_JAX_CACHE, else $XDG_CACHE_HOME/roll_jax/jax, else ~/.cache/roll_jax/jax."""
+    if os.environ.get("ROLL_JAX_CACHE"):
+        return os.environ["ROLL_JAX_CACHE"]
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return os.path.join(base, "roll_jax", "jax")
+
+
+def use(path: str, min_compile_s: float = 1.0) -> str:
+    """Cache programs that took >= `min_compile_s` to compile in `path`; returns the cache
+    directory in use (the earlier one if the process configured one already)."""
+    import jax
+
+    if jax.config.jax_compilation_cache_dir:
+        return jax.config.jax_compilation_cache_dir
+    os.makedirs(path, exist_ok=True)
+    jax.config.update("jax_compilation_cache_dir", path)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", min_compile_s)
+    return path

@@ -1,0 +1,98 @@
+"""`--algo oracle`: the real chunk with true positions for latents and no images."""
+
+import jax
+import numpy as np
+import pytest
+
+import envs_mjx
+from configs.train import make_config
+from roll_jax import loop, pretrain
+from roll_jax.agent import Frozen, goal_encoder
+
+
+@pytest.fixture(scope="module")
+def chunk_out():
+    cfg = make_config("puck_push", "oracle", "smoke", seeds=1, n_eval_goals=2)
+    env = envs_mjx.make("puck_push")
+    pre = pretrain.initial(cfg, jax.random.PRNGKey(0))
+    state = jax.jit(lambda k: loop.init_state(k, cfg, env, pre.scene_vae, pre.lstm))(
+        jax.random.PRNGKey(1))
+    chunk = jax.jit(loop.make_chunk(cfg, env))
+    new, metrics = chunk(state, Frozen(seg=None, object_vae=None), loop.plan_chunk(cfg, 0))
+    return cfg, env, new, metrics
+
+
+def test_oracle_stores_true_positions(chunk_out):
+    cfg, env, state, _ = chunk_out
+    enc = goal_encoder(cfg)
+    assert enc.oracle and not enc.segment and not enc.lstm
+    buf = state.buffer
+    n = cfg.n_envs * cfg.episodes_per_epoch
+    assert int(buf.size) == n
+    assert buf.images.shape[2:] == (1, 1, 3) and not np.any(np.asarray(buf.images))
+    obs, goal = np.asarray(buf.obs_latents[:n]), np.asarray(buf.goal_latents[:n])
+    assert obs.shape[-1] == 3 + env.object_size and goal.shape[-1] == env.object_size
+    # The observation's object part is the achieved goal; the frame latents are the same.
+    np.testing.assert_array_equal(obs[..., 3:], goal)
+    np.testing.assert_array_equal(np.asarray(buf.frame_latents[:n]), goal)
+    # The last stored frame is the envs' final state, centred, in units of ORACLE_SCALE metres.
+    last = state.env_state
+    centre = loop.oracle_centre(env)
+    hand = (np.asarray(jax.vmap(env.hand_pos)(last)) - centre[:3]) / loop.ORACLE_SCALE
+    puck = (np.asarray(jax.vmap(env.object_state)(last)) - centre[3:]) / loop.ORACLE_SCALE
+    np.testing.assert_allclose(obs[-cfg.n_envs:, -1, :3], hand, rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(goal[-cfg.n_envs:, -1], puck, rtol=1e-5, atol=1e-5)
+    # Random actions move the hand: the episode is not a constant.
+    assert np.ptp(obs[..., :3], axis=1).max() > 0.1
+
+
+def test_oracle_evaluates_with_a_rendered_video(chunk_out):
+    cfg, _env, _state, metrics = chunk_out
+    ev = metrics["eval"]
+    d = np.asarray(ev["distances"])
+    assert d.shape == (cfg.n_eval_goals * cfg.episodes_per_epoch,) and np.all(np.isfinite(d))
+    video = np.asarray(ev["video"])
+    assert video.shape == (cfg.horizon + 1, 48, 48, 3) and video.std() > 0
+    assert np.asarray(ev["goal_image"]).shape == (48, 48, 3)
+
+
+def test_oracle_goal_bank_lies_in_the_goal_space():
+    env = envs_mjx.make("puck_push")
+    bank = np.asarray(jax.jit(lambda k: loop.goal_bank(None, env, k, 256))(
+        jax.random.PRNGKey(0)))
+    assert bank.shape == (256, env.object_size)
+    lo, hi = bank.min(0), bank.max(0)
+    assert np.all(hi - lo > 0.5)  # spread over the box (> 5 cm per axis)
+    assert np.all(np.abs(bank.mean(0)) < 0.2)  # centred: the goal space's middle is 0
+    goal = np.asarray(env.object_state(env.sample_goal(jax.random.PRNGKey(7))))
+    np.testing.assert_allclose(
+        loop.oracle_goal(env, env.sample_goal(jax.random.PRNGKey(7))),
+        (goal - loop.oracle_centre(env)[3:]) / loop.ORACLE_SCALE, rtol=1e-6)
+
+
+def test_step_schedule_learns_during_collection_and_evaluates_the_start_policy(chunk_out):
+    """sac_schedule "step": the updates run inside the episode (the SAC state after the chunk
+    has them all), while the test envs act with the policy the chunk started from: their
+    distances equal those of the "epoch" schedule from the same state."""
+    import dataclasses
+
+    cfg, env, _, _ = chunk_out
+    sac_cfg = dataclasses.replace(cfg.sac, learning_starts=0)
+    pre = pretrain.initial(cfg, jax.random.PRNGKey(0))
+    results = {}
+    for schedule in ("epoch", "step"):
+        c = dataclasses.replace(cfg, sac=sac_cfg, sac_schedule=schedule)
+        state = jax.jit(lambda k, c=c: loop.init_state(k, c, env, pre.scene_vae, pre.lstm))(
+            jax.random.PRNGKey(1))
+        plan = loop.plan_chunk(c, 0)
+        assert bool(plan.learn) and not bool(plan.act_random)
+        new, m = jax.jit(loop.make_chunk(c, env))(state, Frozen(seg=None, object_vae=None), plan)
+        results[schedule] = (new, m)
+    (e_state, e_m), (s_state, s_m) = results["epoch"], results["step"]
+    n_updates = cfg.epoch_env_steps * cfg.sac.updates_per_step
+    assert int(e_state.sac.step) == int(s_state.sac.step) == n_updates
+    np.testing.assert_allclose(np.asarray(s_m["eval"]["distances"]),
+                               np.asarray(e_m["eval"]["distances"]), rtol=1e-6, atol=1e-7)
+    # The training envs acted with a policy that changed during the episode: other actions.
+    assert not np.allclose(np.asarray(s_state.buffer.actions), np.asarray(e_state.buffer.actions))
+    assert np.isfinite(float(s_m["train"]["q_loss"])) and float(s_m["train"]["q_loss"]) != 0.0
