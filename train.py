@@ -64,8 +64,9 @@ def parse_args(argv=None):
 
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--task", default="puck_push")
-    p.add_argument("--algo", default="roll")
-    p.add_argument("--preset", default="smoke")
+    p.add_argument("--algo", default="roll", help=" | ".join(ALGOS) + " (default roll)")
+    p.add_argument("--preset", default="smoke",
+                   help="smoke | cpu | paper (configs/presets.py); default smoke")
     p.add_argument("--seeds", type=int, default=1)
     p.add_argument("--out", default=None)
     p.add_argument("--resume", action="store_true")

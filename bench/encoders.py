@@ -34,7 +34,7 @@ import jax.numpy as jnp
 
 from configs.encoders import lstm_config, object_vae_config, scene_vae_config
 from roll_jax import encoders
-from roll_jax.agent import GoalEncoder
+from roll_jax.goal_encoding import GoalEncoder
 from roll_jax.models import lstm_encode
 
 RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "encoders.json")

@@ -1,7 +1,7 @@
 """Reproduction-grid benchmark: wall time of the whole smoke grid and where it goes.
 
 Runs `python -m roll_jax.reproduce --preset smoke --out DIR --ablations --jobs 2` (13 runs,
-2 seeds each; issue 7's target: under 20 min on a 2-core CPU) as a subprocess, times it, and
+2 seeds each; the target: under 20 min on a 2-core CPU) as a subprocess, times it, and
 collects every run's `timings.json` (wall and CPU seconds per phase) into one JSON file:
 
     python bench/grid.py --out /tmp/grid [--jobs 2] [--results bench/results/grid_smoke.json]

@@ -57,7 +57,7 @@ def main(argv=None) -> dict:
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--task", default="puck_push")
     p.add_argument("--algo", default="roll", choices=("roll", "skewfit", "oracle"))
-    p.add_argument("--preset", default="cpu")
+    p.add_argument("--preset", default="cpu", help="smoke | cpu | paper (configs/presets.py)")
     p.add_argument("--seeds", type=int, default=3)
     p.add_argument("--seed", type=int, default=0, help="base PRNG seed of the run")
     p.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE")

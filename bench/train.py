@@ -61,7 +61,7 @@ import envs_mjx
 from configs.presets import PRESETS
 from configs.train import make_config
 from roll_jax import encoders, loop, sac, sharding
-from roll_jax.agent import Frozen, goal_encoder
+from roll_jax.goal_encoding import Frozen, goal_encoder
 from roll_jax.segmentation import mog2, pipeline, unet
 
 RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "train.json")

@@ -1,8 +1,8 @@
-"""pickup: the task's training values (paper Table 2; run length from SCENES.md)."""
+"""pickup: the task's training values (Table 2; run length: the reference code)."""
 
 TRAIN = {
     "horizon": 50,  # Table 2: trajectory length
-    "total_env_steps": 400000,  # SCENES.md: ROLL run length (epochs x 500 env steps)
+    "total_env_steps": 400000,  # reference code launch files: epochs x 500 env steps
     "skew_alpha": -1.0,  # Table 2: Skew-Fit alpha for the scene-VAE
     "vae_schedule": "custom_schedule_2",  # Skew-Fit appendix C.5 (rlkit vae_schedules)
     "scene_pretrain_data": "goals",  # reference code: an oracle dataset (our reading: set to goals)

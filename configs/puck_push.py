@@ -1,8 +1,8 @@
-"""puck_push: the task's training values (paper Table 2; run length from SCENES.md)."""
+"""puck_push: the task's training values (Table 2; run length: the reference code)."""
 
 TRAIN = {
     "horizon": 50,  # Table 2: trajectory length
-    "total_env_steps": 300000,  # SCENES.md: ROLL run length (epochs x 500 env steps)
+    "total_env_steps": 300000,  # reference code launch files: epochs x 500 env steps
     "skew_alpha": -1.0,  # Table 2: Skew-Fit alpha for the scene-VAE
     "vae_schedule": "custom_schedule_2",  # Skew-Fit appendix C.5 (rlkit vae_schedules)
     "scene_pretrain_data": "goals",  # reference code (launch_ROLL_sawyerpush.py): set to goals

@@ -34,7 +34,7 @@ class SACConfig:
     # Replay.
     replay_size: int = 100_000  # Table 4 (transitions; trajectories = replay_size // horizon)
     learning_starts: int = 10_000  # not in Table 4: Skew-Fit's min_num_steps_before_training
-    # Goal relabeling (RIG-style HER, Algorithm 1): issue 6 / Skew-Fit's relabeling buffer
+    # Goal relabeling (RIG-style HER, Algorithm 1): Skew-Fit's relabeling buffer
     # (fraction_goals_rollout_goals=0.2, fraction_goals_env_goals=0.5 -> prior goals, rest future).
     rollout_goal_frac: float = 0.2
     prior_goal_frac: float = 0.5

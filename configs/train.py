@@ -67,7 +67,7 @@ class TrainConfig:
     algo: str
     preset: str
     horizon: int  # Table 2: trajectory length
-    total_env_steps: int  # per seed; SCENES.md: ROLL epochs x 500 steps
+    total_env_steps: int  # per seed; reference code launch files: epochs x 500 steps
     epoch_env_steps: int = 500  # rlkit num_expl_steps_per_train_loop (one compiled chunk)
     n_envs: int = 10  # envs per seed stepping together (ours; 2 SAC updates per transition kept)
     seeds: int = 1

@@ -1,4 +1,4 @@
-"""MJX Sawyer scenes and a pure-JAX camera renderer (the Env contract of DESIGN.md)."""
+"""MJX Sawyer scenes and a pure-JAX camera renderer (the Env contract of docs/architecture.md)."""
 
 from envs_mjx.env import Env, EnvState, LABEL_BACKGROUND, LABEL_OBJECT, LABEL_ROBOT
 from envs_mjx.tasks import TASKS

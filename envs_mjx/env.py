@@ -1,4 +1,4 @@
-"""The Env contract of DESIGN.md: pure `reset` / `step` / `render` over an MJX scene.
+"""The Env contract of docs/architecture.md: pure `reset` / `step` / `render` over an MJX scene.
 
 An `Env` is a Python object holding only static things (the MJX model, renderers, the
 task spec); every method is a pure function of an `EnvState`, so `jax.jit(env.step)` and

@@ -1,4 +1,4 @@
-"""MJCF builders for the five tabletop scenes (numbers from SCENES.md / the paper's appendix).
+"""MJCF builders for the five tabletop scenes (numbers from multiworld / the paper's appendix).
 
 Collision is declared only through explicit `<contact><pair>` elements (every geom has
 contype = conaffinity = 0). That keeps the pure-JAX MJX collision set small (it has no

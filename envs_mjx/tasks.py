@@ -1,7 +1,7 @@
 """The five tasks' numbers: horizons, hand ranges, resets, goal spaces and cameras.
 
 Sources: the paper's appendix "Simulated task details" (wins for goal/reset spaces) and
-../shared/SCENES.md (multiworld values). Deviations are explained in docs/scenes.md.
+multiworld (the reference code's environments). Deviations are explained in docs/scenes.md.
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ class TaskSpec:
     reset_free: bool = False
 
 
-# Push tasks: SCENES.md's hand box [-0.1, 0.1] x [0.55, 0.65] is the hand *goal/state* box of
+# Push tasks: multiworld's hand box [-0.1, 0.1] x [0.55, 0.65] is the hand *goal/state* box of
 # the appendix; the reset (-0.02, 0.5) lies outside it, so the mocap clip box must be larger
 # (multiworld's is too). Ours contains the reset and lets the hand reach every side of the
 # puck goal space (puck radius 0.04 + claw radius 0.015).
@@ -86,7 +86,7 @@ TASKS: dict[str, TaskSpec] = {
         reset_free=True,
     ),
     # Pickup: the appendix gives a 10 cm (y) x 13 cm (z) state/goal box for hand and object;
-    # SCENES.md's z range [0.05, 0.13] is 8 cm and excludes the hand reset z = 0.2, so the
+    # multiworld's z range [0.05, 0.13] is 8 cm and excludes the hand reset z = 0.2, so the
     # hand box is [0.07, 0.20] (13 cm, contains the reset; at z = 0.07 the fingers reach the
     # cube on the table) and the object box is 5 cm lower: z in [0.02, 0.15].
     "pickup": TaskSpec(

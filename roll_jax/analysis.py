@@ -18,7 +18,7 @@
        python -m roll_jax.analysis occlusion --ckpt DIR [--out DIR]
 
 DIR is the output of `python -m roll_jax.pretrain --task TASK --out DIR` (DIR/segmentation,
-DIR/encoders, DIR/pretrain.json); --out defaults to DIR/analysis. JSON keys follow DESIGN.md
+DIR/encoders, DIR/pretrain.json); --out defaults to DIR/analysis. JSON keys follow docs/architecture.md
 ("Evaluation files"): `spearman_object`, `spearman_scene`; `error_cm` = {"lstm_matching":
 [mean, std], "lstm": [...], "vae": [...]}.
 
@@ -41,7 +41,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from roll_jax import encoders, losses
-from roll_jax.agent import Frozen, GoalEncoder, goal_encoder
+from roll_jax.goal_encoding import Frozen, GoalEncoder, goal_encoder
 from roll_jax.models import lstm_encode
 
 # Appendix A, Fig. S1(a): estimation error of the occluded puck position (cm).

@@ -36,7 +36,7 @@ from flax import struct
 
 from configs.train import TrainConfig, vae_schedule
 from roll_jax import encoders, replay, sac
-from roll_jax.agent import Frozen, GoalEncoder, goal_encoder
+from roll_jax.goal_encoding import Frozen, GoalEncoder, goal_encoder
 from roll_jax.models import ConvVAE, to_float
 
 TRACE_COUNTS: collections.Counter = collections.Counter()

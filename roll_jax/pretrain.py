@@ -30,7 +30,7 @@ from flax import struct
 
 from configs.train import TrainConfig
 from roll_jax import encoders
-from roll_jax.agent import goal_encoder
+from roll_jax.goal_encoding import goal_encoder
 from roll_jax.checkpoint import read_meta, write_meta
 from roll_jax.segmentation import pipeline
 
@@ -301,7 +301,8 @@ def main(argv=None):
     p = argparse.ArgumentParser(prog="python -m roll_jax.pretrain", description=__doc__,
                                 formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--task", required=True)
-    p.add_argument("--preset", default="paper")
+    p.add_argument("--preset", default="paper",
+                   help=f"one of {', '.join(PRESETS)} (configs/presets.py)")
     p.add_argument("--algo", default="roll")
     p.add_argument("--out", required=True)
     p.add_argument("--seg", default=None, help="segmentation checkpoint dir (fitted if absent)")

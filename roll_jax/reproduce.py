@@ -164,7 +164,7 @@ def pretrain_dir(run_out: str) -> str:
 
 
 def _uses_segmentation(c: Cell) -> bool:
-    from roll_jax.agent import goal_encoder
+    from roll_jax.goal_encoding import goal_encoder
 
     return goal_encoder(c.cfg).segment
 
@@ -184,7 +184,7 @@ def fit_dependencies(cells: list[Cell]) -> dict[str, list[Cell]]:
 
 def _models_pretrained(c: Cell) -> int:
     """How many encoders a cell pre-trains (scene-VAE, object-VAE, LSTM): its size, roughly."""
-    from roll_jax.agent import goal_encoder
+    from roll_jax.goal_encoding import goal_encoder
 
     enc = goal_encoder(c.cfg)
     return 1 + (enc.object_cfg is not None) + bool(enc.lstm)

@@ -26,7 +26,7 @@ from configs.overrides import parse_overrides
 from configs.train import TrainConfig
 from roll_jax import loop, pretrain
 from roll_jax import sharding as shd
-from roll_jax.agent import Frozen, goal_encoder
+from roll_jax.goal_encoding import Frozen, goal_encoder
 
 LOSS_KEYS = ("q_loss", "policy_loss", "alpha_loss", "vae_loss", "lstm_loss")
 COMPLETE_MARKER = "complete.json"

@@ -4,7 +4,11 @@ import os
 os.environ.setdefault("JAX_PLATFORMS", "cpu")
 os.environ.setdefault("MUJOCO_GL", "disable")
 
+import importlib.util  # noqa: E402
+import sys  # noqa: E402
+
 import jax  # noqa: E402
+import pytest  # noqa: E402
 
 _CACHE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), ".jax_cache")
 jax.config.update("jax_compilation_cache_dir", _CACHE)
@@ -23,3 +27,14 @@ def pytest_collection_modifyitems(config, items):
         return _SLOW_FIRST.index(name) if name in _SLOW_FIRST else len(_SLOW_FIRST)
 
     items.sort(key=rank)  # stable: keeps the order inside each file
+
+
+@pytest.fixture
+def train_cli(monkeypatch):
+    """The top-level train.py (the command line) loaded as a module."""
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    spec = importlib.util.spec_from_file_location("train_cli", os.path.join(root, "train.py"))
+    mod = importlib.util.module_from_spec(spec)
+    monkeypatch.setitem(sys.modules, "train_cli", mod)
+    spec.loader.exec_module(mod)
+    return mod

@@ -1,39 +1,27 @@
 """train.py (the command line): flags reach the TrainConfig; bad values fail in argparse."""
 
-import importlib.util
 import os
-import sys
 
 import pytest
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-
-
-@pytest.fixture
-def cli(monkeypatch):
-    spec = importlib.util.spec_from_file_location("train_cli", os.path.join(ROOT, "train.py"))
-    mod = importlib.util.module_from_spec(spec)
-    monkeypatch.setitem(sys.modules, "train_cli", mod)
-    spec.loader.exec_module(mod)
-    return mod
-
 
 @pytest.mark.parametrize("algo", ["roll", "skewfit"])
-def test_n_envs_reaches_the_train_config(cli, tmp_path, capsys, algo):
+def test_n_envs_reaches_the_train_config(train_cli, tmp_path, capsys, algo):
     out = str(tmp_path / "run")
-    _, default, _ = cli.parse_args(["--algo", algo, "--devices", "1", "--out", out])
-    _, cfg, _ = cli.parse_args(["--algo", algo, "--n-envs", "5", "--devices", "1", "--out", out])
+    _, default, _ = train_cli.parse_args(["--algo", algo, "--devices", "1", "--out", out])
+    _, cfg, _ = train_cli.parse_args(["--algo", algo, "--n-envs", "5", "--devices", "1",
+                                      "--out", out])
     assert default.n_envs == 10 and cfg.n_envs == 5
     assert cfg.epoch_env_steps == default.epoch_env_steps  # only n_envs changed
     # 500 env steps per chunk is not whole episodes of 3 envs x 50 steps: argparse says so.
     with pytest.raises(SystemExit):
-        cli.parse_args(["--algo", algo, "--n-envs", "3", "--devices", "1", "--out", out])
+        train_cli.parse_args(["--algo", algo, "--n-envs", "3", "--devices", "1", "--out", out])
     err = capsys.readouterr().err
     assert "--n-envs 3: " in err and "multiple of n_envs * horizon = 3 * 50" in err
     with pytest.raises(SystemExit):
-        cli.parse_args(["--algo", algo, "--n-envs", "0", "--devices", "1", "--out", out])
+        train_cli.parse_args(["--algo", algo, "--n-envs", "0", "--devices", "1", "--out", out])
     assert "--n-envs 0: TrainConfig.n_envs must be positive, got 0" in capsys.readouterr().err
     with pytest.raises(SystemExit):
-        cli.parse_args(["--algo", algo, "--n-envs", "5", "--set", "n_envs=2", "--out", out])
+        train_cli.parse_args(["--algo", algo, "--n-envs", "5", "--set", "n_envs=2", "--out", out])
     assert "both set n_envs" in capsys.readouterr().err
     assert not os.path.exists(out)

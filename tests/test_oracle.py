@@ -7,7 +7,7 @@ import pytest
 import envs_mjx
 from configs.train import make_config
 from roll_jax import loop, pretrain
-from roll_jax.agent import Frozen, goal_encoder
+from roll_jax.goal_encoding import Frozen, goal_encoder
 
 
 @pytest.fixture(scope="module")

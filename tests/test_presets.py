@@ -1,17 +1,11 @@
 """Presets live in configs/presets.py: every CLI takes each of them, and they mean the same
 thing everywhere (no module keeps a copy)."""
 
-import importlib.util
-import os
-import sys
-
 import pytest
 
 from configs import presets
 from configs.segmentation import segmentation_config
 from configs.train import TASKS, make_config
-
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def test_every_preset_builds_every_task_and_algo():
@@ -49,15 +43,6 @@ def test_unknown_preset_names_the_known_ones():
         presets.get("gpu")
     with pytest.raises(ValueError, match="unknown group"):
         presets.Preset("x", "", {"trian": {}})
-
-
-@pytest.fixture
-def train_cli(monkeypatch):
-    spec = importlib.util.spec_from_file_location("train_cli", os.path.join(ROOT, "train.py"))
-    mod = importlib.util.module_from_spec(spec)
-    monkeypatch.setitem(sys.modules, "train_cli", mod)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 def test_every_cli_takes_preset_cpu_and_lists_the_presets(train_cli, tmp_path, capsys):

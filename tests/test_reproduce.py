@@ -198,7 +198,7 @@ def test_parallel_jobs_fit_each_segmentation_once_before_its_other_cells(tmp_pat
     import threading
     import time as _time
 
-    from roll_jax.agent import goal_encoder
+    from roll_jax.goal_encoding import goal_encoder
 
     events, lock = [], threading.Lock()
 

@@ -15,7 +15,7 @@ from scipy import stats
 from configs.encoders import VAEConfig
 from configs.train import make_config
 from roll_jax import encoders, loop, losses, replay
-from roll_jax.agent import Frozen, GoalEncoder, goal_encoder
+from roll_jax.goal_encoding import Frozen, GoalEncoder, goal_encoder
 from roll_jax.checkpoint import write_meta
 
 CAP, T, HW, A, DG = 5, 3, 4, 2, 2

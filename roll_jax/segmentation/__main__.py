@@ -23,7 +23,8 @@ def parse_args(argv=None):
     p = argparse.ArgumentParser(prog="python -m roll_jax.segmentation", description=__doc__,
                                 formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--task", required=True)
-    p.add_argument("--preset", default="paper")
+    p.add_argument("--preset", default="paper",
+                   help=f"one of {', '.join(PRESETS)} (configs/presets.py)")
     p.add_argument("--out", required=True)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--eval-states", type=int, default=None, help="override the preset")

@@ -1,6 +1,6 @@
 """jax.numpy port of OpenCV's BackgroundSubtractorMOG2 (CPU path), bit-exact.
 
-Behaviour follows /work/shared/MOG2_SPEC.md and OpenCV's ``bgfg_gaussmix2.cpp`` step by step:
+Behaviour follows OpenCV's ``bgfg_gaussmix2.cpp`` step by step:
 the learning-rate rule (including OpenCV's re-initialisation on ``learningRate >= 1``), the
 per-slot weight decay with the prune quirk (a pruned slot keeps its place with weight 0 and the
 last slot is dropped unprocessed), bubbling of the matched mode (ties move up), renormalisation
