@@ -74,13 +74,18 @@ SCRIPT = textwrap.dedent("""
                                          if op in hlo]}
 
     # Untrained segmentation and encoders; one 100-step chunk of 2 envs per seed, SAC learning
-    # from step 50, LSTM and scene-VAE trained in the chunk.
+    # from step 50, the LSTM trained in the chunk.
     seg = segmentation_config("puck_push", "smoke", n_frames=300, unet_epochs=2, eval_states=8)
     base_cfg = make_config("puck_push", "roll", "smoke", n_eval_goals=2, segmentation=seg)
     cfg = make_config("puck_push", "roll", "smoke", seeds=4, n_envs=2, epoch_env_steps=100,
                       total_env_steps=100, n_eval_goals=2, segmentation=seg,
                       sac=dataclasses.replace(base_cfg.sac, learning_starts=50),
-                      lstm=dataclasses.replace(base_cfg.lstm, online_schedule=((2**62, 100, 2),)))
+                      lstm=dataclasses.replace(base_cfg.lstm, online_schedule=((2**62, 100, 2),)),
+                      # No online scene-VAE training: Adam's first steps move its near-zero
+                      # head weights by about lr * sign(gradient), so float32 roundoff between
+                      # the two programs can flip a latent dimension; nothing to do with
+                      # placement, which is what this compares.
+                      vae_schedule="none")
     given = {"seg_ckpt": os.path.join(base, "segmentation"), "enc_ckpt": os.path.join(base, "encoders")}
     pipeline.save(given["seg_ckpt"], "puck_push",
                   pipeline.initial_params(48, 48, 3, seg, jax.random.PRNGKey(1)), seg)
@@ -122,8 +127,9 @@ SCRIPT = textwrap.dedent("""
     abstract = jax.eval_shape(lambda k: loop.init_state(k, cfg, envs_mjx.make("puck_push"),
                                                         pre.scene_vae, pre.lstm),
                               jax.random.PRNGKey(0))
-    report["leaf_paths"] = [jax.tree_util.keystr(p) for p, x in
-                            jax.tree_util.tree_flatten_with_path(abstract)[0] if x.size]
+    # The checkpoint's keys index all leaves (empty ones are not saved).
+    report["leaf_paths"] = [jax.tree_util.keystr(p) for p, _ in
+                            jax.tree_util.tree_flatten_with_path(abstract)[0]]
     # Each finished run resumed on the other device count: its checkpoint restores there
     # (nothing left to train: no chunk is compiled).
     report["cross_resume"] = {
@@ -194,14 +200,11 @@ def test_sharded_equals_unsharded(two_device_runs):
         if x.dtype.kind != "f":  # replay images, indices, counters
             assert np.mean(x != y) <= 1e-4, k
             continue
-        if "opt_state" in report["leaf_paths"][int(k)]:
-            # Adam moments after a few steps on replay batches of episodes that diverged at
-            # float32 roundoff (rows above agree): not comparable leaf by leaf.
-            continue
+        path = report["leaf_paths"][int(k)]
         for s in range(x.shape[0]):
             diff = np.linalg.norm(x[s].astype(np.float64) - y[s])
             # Relative, with an absolute floor for leaves near zero (biases that started at 0).
-            assert diff <= 0.25 * np.linalg.norm(y[s].astype(np.float64)) + 1e-2, (k, s)
+            assert diff <= 0.25 * np.linalg.norm(y[s].astype(np.float64)) + 1e-2, (path, s)
 
 
 def test_resume_on_other_device_count(two_device_runs):
