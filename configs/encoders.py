@@ -86,6 +86,9 @@ class VAEConfig:
             raise ValueError(f"VAEConfig.matching_coef must be >= 0, got {self.matching_coef!r}")
         if not 0.0 <= self.occlusion_drop <= 1.0:
             raise ValueError(f"VAEConfig.occlusion_drop must be in [0, 1], got {self.occlusion_drop!r}")
+        if self.image_size != 48:
+            raise ValueError(f"VAEConfig.image_size must be 48 (the conv stack maps 48 -> 15 -> 7 "
+                             f"-> 3 and back), got {self.image_size!r}")
         if self.kl_reference_batch is not None and self.kl_reference_batch <= 0:
             raise ValueError(f"VAEConfig.kl_reference_batch must be positive or None, got "
                              f"{self.kl_reference_batch!r}")

@@ -44,6 +44,8 @@ def test_effective_beta_is_beta_over_reference_batch():
                              batch_size=32).effective_beta == 20.0 / 32
     with pytest.raises(ValueError, match="kl_reference_batch"):
         object_vae_config("puck_push", kl_reference_batch=0)
+    with pytest.raises(ValueError, match="image_size must be 48 .* got 64"):
+        object_vae_config("puck_push", image_size=64)
 
 
 def test_vae_train_step_loss_is_the_reference_objective():
