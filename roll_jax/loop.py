@@ -204,13 +204,13 @@ def goal_prior(cfg: TrainConfig, enc: GoalEncoder, env, buffer, key):
     states; the buffer's frame-latent (mean, std) for cfg.prior_goals "buffer"; None for the
     standard normal prior (Algorithm 1)."""
     if enc.oracle:
-        return goal_bank(cfg, env, key)
+        return goal_bank(env, key)
     if cfg.prior_goals == "buffer" and not enc.skewed_goals:
         return frame_stats(buffer)
     return None
 
 
-def goal_bank(cfg: TrainConfig, env, key, n: int = 1024):
+def goal_bank(env, key, n: int = 1024):
     """The oracle's prior goals: n object states drawn from the task's goal space."""
     return jax.vmap(lambda k: oracle_goal(env, env.sample_goal(k)))(jax.random.split(key, n))
 
@@ -261,7 +261,7 @@ def collect_episode(cfg: TrainConfig, env, enc: GoalEncoder, frozen: Frozen, sta
         jax.random.split(k_reset, n_train + cfg.n_eval_goals))
     test_states, test_rgb, test_lat = test_goals(cfg, env, enc, frozen, scene_params,
                                                  lstm_params, k_test)
-    cdf = skew_cdf(state.skew_log_p, cfg.skew_alpha, state.buffer.size) if enc.skewed_goals else None
+    cdf = _skew_cdf_of(cfg, enc, state)  # the buffer is fixed for the whole episode
     goals = jnp.concatenate([fresh_goals(enc, state.buffer, cdf, lstm_params, k_goal, n_train,
                                          prior), test_lat])
     is_test = (jnp.arange(goals.shape[0]) >= n_train)[:, None]
@@ -277,7 +277,6 @@ def collect_episode(cfg: TrainConfig, env, enc: GoalEncoder, frozen: Frozen, sta
         z = scene_latents(cfg, scene_params, rgb)
         return (rgb, z), z
 
-    cdf_sac = _skew_cdf_of(cfg, enc, state) if interleave else None
     zero_sac = zero_sac_metrics(cfg, enc, state, prior) if interleave else None
     n_per_step = cfg.n_envs * cfg.sac.updates_per_step
 
@@ -293,7 +292,7 @@ def collect_episode(cfg: TrainConfig, env, enc: GoalEncoder, frozen: Frozen, sta
         sac_m = None
         if interleave:
             sac_s, sac_m = jax.lax.cond(
-                learn, lambda s_: sac_steps(cfg, enc, s_, state.buffer, cdf_sac, lstm_params,
+                learn, lambda s_: sac_steps(cfg, enc, s_, state.buffer, cdf, lstm_params,
                                             k_upd, n_per_step, prior),
                 lambda s_: (s_, zero_sac), sac_s)
         return (es, z, sac_s), (rec, a, sac_m)
@@ -487,18 +486,19 @@ def train_scene_vae(cfg: TrainConfig, state: TrainState, key, n_batches):
             {"vae_loss": loss_sum / jnp.maximum(n_batches, 1)})
 
 
-def lstm_online_batch(cfg: TrainConfig, enc: GoalEncoder, frozen: Frozen, scene_params, key,
-                      frame_latents, goal_images):
-    """Inputs of one online LSTM step for trajectories with cached frame latents [B, T, d] and
-    goal images [B, T, H, W, 3]: the latents and, unless the matching loss is ablated, one
-    occluded frame per trajectory, encoded now (encoders.Occlusion; else None)."""
+def online_occlusion(cfg: TrainConfig, enc: GoalEncoder, frozen: Frozen, scene_params, key,
+                     goal_images):
+    """The occluded frame per trajectory of goal images [B, T, H, W, 3] that an online LSTM
+    step's matching loss compares (encoders.Occlusion, encoded now by the frame encoder);
+    None when the matching loss is ablated. The clean frames' latents come from the buffer's
+    cache (`frame_latents`)."""
     if not cfg.matching_loss:
-        return frame_latents, None
+        return None
     if enc.object_cfg is not None:
         params, frame_cfg = frozen.object_vae, enc.object_cfg
     else:
         params, frame_cfg = scene_params, enc.scene_cfg
-    return frame_latents, encoders.make_occlusion(key, params, frame_cfg, goal_images, cfg.lstm)
+    return encoders.make_occlusion(key, params, frame_cfg, goal_images, cfg.lstm)
 
 
 def train_lstm(cfg: TrainConfig, enc: GoalEncoder, frozen: Frozen, state: TrainState, key,
@@ -510,9 +510,8 @@ def train_lstm(cfg: TrainConfig, enc: GoalEncoder, frozen: Frozen, state: TrainS
         s, loss = carry
         k_s, k_occ, k_step = jax.random.split(jax.random.fold_in(key, i), 3)
         tr = replay.sample_trajectories(s.buffer, k_s, cfg.lstm.online_batch_size)
-        lat, occ = lstm_online_batch(cfg, enc, frozen, s.scene_vae.params, k_occ,
-                                     tr.frame_latents, tr.object_images)
-        ls, m = encoders.lstm_train_step(s.lstm, k_step, lat, cfg.lstm, occ)
+        occ = online_occlusion(cfg, enc, frozen, s.scene_vae.params, k_occ, tr.object_images)
+        ls, m = encoders.lstm_train_step(s.lstm, k_step, tr.frame_latents, cfg.lstm, occ)
         return s.replace(lstm=ls), loss + m["loss"]
 
     state, loss_sum = jax.lax.fori_loop(0, n_batches, body, (state, jnp.float32(0)))

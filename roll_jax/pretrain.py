@@ -55,9 +55,8 @@ def scene_dataset(env, key, n_images: int, source: str = "random_policy") -> jax
     from envs_mjx.rollout import random_actions, rollout
 
     if source == "goals":
-        rgb = jax.jit(jax.vmap(lambda k: env.render(env.sample_goal(k))))(
+        return jax.jit(jax.vmap(lambda k: env.render(env.sample_goal(k))))(
             jax.random.split(key, n_images))
-        return rgb
     if source != "random_policy":
         raise ValueError(f"scene data source must be 'random_policy' or 'goals', got {source!r}")
 
@@ -175,7 +174,8 @@ def pretrain(cfg: TrainConfig, env, seg_params, key, progress: bool = True,
     def scene_data():  # built or loaded once, only when a model is (re)trained on it
         if "scene" not in data:
             data["scene"], _ = _cached(
-                cache, "scene_data", sd_spec, lambda: (scene_dataset(env, k_sd, n_scene, cfg.scene_pretrain_data), None),
+                cache, "scene_data", sd_spec,
+                lambda: (scene_dataset(env, k_sd, n_scene, cfg.scene_pretrain_data), None),
                 lambda: jax.ShapeDtypeStruct((n_scene,) + cfg.scene.image_shape, jax.numpy.uint8))
             info["scene_data"] = data["scene"]
         return data["scene"]

@@ -58,7 +58,7 @@ def test_oracle_evaluates_with_a_rendered_video(chunk_out):
 
 def test_oracle_goal_bank_lies_in_the_goal_space():
     env = envs_mjx.make("puck_push")
-    bank = np.asarray(jax.jit(lambda k: loop.goal_bank(None, env, k, 256))(
+    bank = np.asarray(jax.jit(lambda k: loop.goal_bank(env, k, 256))(
         jax.random.PRNGKey(0)))
     assert bank.shape == (256, env.object_size)
     lo, hi = bank.min(0), bank.max(0)

@@ -160,12 +160,11 @@ def _norms(tree):
 
 
 def _lstm_loss(cfg, enc, lstm_params, vae_params, images):
-    """The online LSTM loss as train_lstm builds it (lstm_online_batch + lstm_train_step's
-    loss), differentiable in the LSTM and in the frame encoder's parameters."""
+    """The online LSTM loss as train_lstm builds it (cached frame latents, online_occlusion +
+    lstm_train_step's loss), differentiable in the LSTM and in the frame encoder's parameters."""
     frozen = Frozen(seg=None, object_vae=vae_params if enc.object_cfg is not None else None)
-    frame_lat = enc.frame_latents(frozen, vae_params, images)  # the buffer's cached latents
-    lat, occ = loop.lstm_online_batch(cfg, enc, frozen, vae_params, jax.random.PRNGKey(5),
-                                      frame_lat, images)
+    lat = enc.frame_latents(frozen, vae_params, images)  # the buffer's cached latents
+    occ = loop.online_occlusion(cfg, enc, frozen, vae_params, jax.random.PRNGKey(5), images)
     return losses.lstm_loss(lstm_params, encoders.lstm_model(cfg.lstm), lat,
                             None if occ is None else occ.latent, None if occ is None else occ.t,
                             matching_coef=cfg.lstm.matching_coef, ae_coef=cfg.lstm.ae_coef,
