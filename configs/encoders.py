@@ -38,6 +38,9 @@ def _check_positive(obj, names) -> None:
             raise ValueError(f"{cls}.{name} must be positive, got {value!r}")
 
 
+CONV_IMPLS = ("matmul", "lax")
+
+
 @dataclasses.dataclass(frozen=True)
 class VAEConfig:
     """One beta-VAE (scene or object): architecture, loss weights and pre-training schedule."""
@@ -75,6 +78,10 @@ class VAEConfig:
     # object 128). A preset that trains on smaller batches for speed keeps the paper's
     # objective by keeping this; None = batch_size.
     kl_reference_batch: int | None = None
+    # Not in the paper: how the convolutions are computed, "matmul" (patches + one matmul per
+    # layer, roll_jax/conv.py: the fast path on XLA:CPU) or "lax" (XLA's convolutions). The
+    # parameters and values are the same (float32 roundoff).
+    conv_impl: str = "matmul"
 
     def __post_init__(self):
         _check_positive(self, ("latent_dim", "feature_dim", "batch_size", "lr", "epochs",
@@ -94,6 +101,8 @@ class VAEConfig:
                              f"{self.kl_reference_batch!r}")
         if self.recon_reduction not in ("sum", "mean"):
             raise ValueError(f"VAEConfig.recon_reduction must be 'sum' or 'mean', got {self.recon_reduction!r}")
+        if self.conv_impl not in CONV_IMPLS:
+            raise ValueError(f"VAEConfig.conv_impl must be one of {CONV_IMPLS}, got {self.conv_impl!r}")
 
     @property
     def image_shape(self) -> tuple[int, int, int]:

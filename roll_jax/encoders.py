@@ -52,7 +52,7 @@ class Occlusion:
 
 def vae_model(cfg: VAEConfig) -> ConvVAE:
     return ConvVAE(latent_dim=cfg.latent_dim, feature_dim=cfg.feature_dim,
-                   min_variance=cfg.min_variance)
+                   min_variance=cfg.min_variance, conv_impl=cfg.conv_impl)
 
 
 def lstm_model(cfg: LSTMConfig) -> LSTMEncoder:

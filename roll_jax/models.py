@@ -33,6 +33,8 @@ import flax.linen as nn
 import jax
 import jax.numpy as jnp
 
+from roll_jax import conv
+
 IMAGE_SHAPE = (48, 48, 3)
 _CONV = ((16, 5, 3), (32, 3, 2), (64, 3, 2))  # (filters, kernel, stride), "Network Architectures"
 _DECONV = ((32, 3, 2), (16, 3, 2), (3, 6, 3))
@@ -66,12 +68,26 @@ def check_images(images, name: str = "images") -> None:
 
 
 class ConvVAE(nn.Module):
+    """``conv_impl``: "matmul" (roll_jax/conv.py, patches + one matmul per layer, the fast
+    path on XLA:CPU) or "lax" (flax's nn.Conv / nn.ConvTranspose, XLA's convolutions); the
+    parameters and values are the same either way."""
+
     latent_dim: int
     feature_dim: int = 576
     min_variance: float = 1e-3
+    conv_impl: str = "matmul"
 
     def setup(self):
-        self.convs = [nn.Conv(f, (k, k), strides=(s, s), padding="VALID") for f, k, s in _CONV]
+        if self.conv_impl == "matmul":
+            self.convs = [conv.Conv(f, k, s) for f, k, s in _CONV]
+            self.deconvs = [conv.ConvTranspose(f, k, s) for f, k, s in _DECONV]
+        elif self.conv_impl == "lax":
+            self.convs = [nn.Conv(f, (k, k), strides=(s, s), padding="VALID")
+                          for f, k, s in _CONV]
+            self.deconvs = [nn.ConvTranspose(f, (k, k), strides=(s, s), padding="VALID")
+                            for f, k, s in _DECONV]
+        else:
+            raise ValueError(f"conv_impl must be 'matmul' or 'lax', got {self.conv_impl!r}")
         self.feature = nn.Dense(self.feature_dim)
         # rlkit's ConvVAE: fc1 (mean) and fc2 (log-variance) weights and biases U(-1e-3, 1e-3)
         # (init_w=1e-3), so training starts near the prior with the variance at its floor.
@@ -79,8 +95,6 @@ class ConvVAE(nn.Module):
         self.mean_head = nn.Dense(self.latent_dim, kernel_init=head_init, bias_init=head_init)
         self.logvar_head = nn.Dense(self.latent_dim, kernel_init=head_init, bias_init=head_init)
         self.dec_fc = nn.Dense(math.prod(_FEATURE_MAP))
-        self.deconvs = [nn.ConvTranspose(f, (k, k), strides=(s, s), padding="VALID")
-                        for f, k, s in _DECONV]
 
     def encode(self, x: jax.Array) -> tuple[jax.Array, jax.Array]:
         """Images [..., 48, 48, 3] (uint8 or float in [0, 1]) -> (mean, logvar) [..., latent]."""

@@ -1,0 +1,100 @@
+"""Convolutions as patch extraction + one matmul, for XLA:CPU.
+
+XLA:CPU runs ``lax.conv_general_dilated`` far below its matmul rate for the encoders' small,
+strided shapes, and its kernel-gradient convolution is slower still inside a ``lax.scan``
+(where every training loop here runs it). A convolution is a matmul over image patches: the
+patches are ``k*k`` strided slices concatenated on the channel axis, so the forward pass is one
+``dot`` and autodiff's backward is two ``dot``s plus pads of the slices -- all ops XLA:CPU runs
+near its matmul rate. Measured figures: bench/roofline.py, docs/training.md.
+
+``Conv`` / ``ConvTranspose`` are drop-in replacements for flax's ``nn.Conv`` /
+``nn.ConvTranspose`` with ``padding="VALID"``: the same parameter names, shapes
+(kernel [k, k, in, out], bias [out]) and initialisers, the same values within float32
+roundoff (tests/test_conv.py compares values and gradients), so checkpoints are unchanged.
+"""
+from __future__ import annotations
+
+import flax.linen as nn
+import jax.numpy as jnp
+
+
+def patches(x: jnp.ndarray, k: int, stride: int) -> jnp.ndarray:
+    """[B, H, W, C] -> [B, Ho, Wo, k*k*C], the VALID ``k x k`` windows at ``stride``, in the
+    kernel's (row, column, channel) order."""
+    _, h, w, _ = x.shape
+    ho, wo = (h - k) // stride + 1, (w - k) // stride + 1
+    cols = [x[:, i:i + stride * (ho - 1) + 1:stride, j:j + stride * (wo - 1) + 1:stride]
+            for i in range(k) for j in range(k)]
+    return jnp.concatenate(cols, axis=-1)
+
+
+def conv_valid(x: jnp.ndarray, kernel: jnp.ndarray, stride: int) -> jnp.ndarray:
+    """VALID cross-correlation, ``nn.Conv(padding="VALID")``'s: x [B, H, W, Cin], kernel
+    [k, k, Cin, Cout] -> [B, Ho, Wo, Cout]."""
+    k, _, cin, cout = kernel.shape
+    if x.shape[-1] != cin:
+        raise ValueError(f"input has {x.shape[-1]} channels, the kernel expects {cin}")
+    return patches(x, k, stride) @ kernel.reshape(k * k * cin, cout)
+
+
+def conv_transpose_valid(x: jnp.ndarray, kernel: jnp.ndarray, stride: int) -> jnp.ndarray:
+    """``nn.ConvTranspose(padding="VALID")``: x [B, H, W, Cin], kernel [k, k, Cin, Cout] ->
+    [B, (H-1)*s + max(k, s), (W-1)*s + max(k, s), Cout] (lax's VALID transpose size).
+
+    Output pixel ``p = i*s + r`` receives ``x[i] @ kernel[k-1-r]`` (flax does not transpose the
+    kernel, so it acts flipped). With the flipped kernel zero-padded to ``m*s`` taps, output
+    block ``b`` (its ``s x s`` pixels) is ``sum_a x[b-a] @ W_a`` over ``a < m``: a stride-1
+    ``m x m`` convolution of the input padded by ``m-1``, with ``s*s*Cout`` output channels,
+    then depth-to-space and a crop.
+    """
+    k, _, cin, cout = kernel.shape
+    if x.shape[-1] != cin:
+        raise ValueError(f"input has {x.shape[-1]} channels, the kernel expects {cin}")
+    s = stride
+    m = -(-k // s)
+    wf = jnp.flip(kernel, (0, 1))
+    wf = jnp.pad(wf, ((0, m * s - k), (0, m * s - k), (0, 0), (0, 0)))
+    # [a*s + r, a'*s + r', ci, co] -> [a, a', ci, r, r', co], tap a applied at block b from x[b-a]
+    wb = wf.reshape(m, s, m, s, cin, cout).transpose(0, 2, 4, 1, 3, 5)
+    # the stride-1 conv over the padded input reads x[b - a] as window offset m-1-a
+    wb = jnp.flip(wb, (0, 1)).reshape(m * m * cin, s * s * cout)
+    b, h, w, _ = x.shape
+    xp = jnp.pad(x, ((0, 0), (m - 1, m - 1), (m - 1, m - 1), (0, 0)))
+    y = patches(xp, m, 1) @ wb  # [B, H+m-1, W+m-1, s*s*Cout]
+    hb, wb_ = h + m - 1, w + m - 1
+    y = y.reshape(b, hb, wb_, s, s, cout).transpose(0, 1, 3, 2, 4, 5)
+    y = y.reshape(b, hb * s, wb_ * s, cout)
+    size = max(k, s)
+    return y[:, :(h - 1) * s + size, :(w - 1) * s + size]
+
+
+class Conv(nn.Module):
+    """``nn.Conv(features, (k, k), strides=(s, s), padding="VALID")`` as patches + matmul."""
+
+    features: int
+    kernel_size: int
+    stride: int = 1
+
+    @nn.compact
+    def __call__(self, x):
+        k = self.kernel_size
+        kernel = self.param("kernel", nn.initializers.lecun_normal(),
+                            (k, k, x.shape[-1], self.features))
+        bias = self.param("bias", nn.initializers.zeros_init(), (self.features,))
+        return conv_valid(x, kernel, self.stride) + bias
+
+
+class ConvTranspose(nn.Module):
+    """``nn.ConvTranspose(features, (k, k), strides=(s, s), padding="VALID")`` as one matmul."""
+
+    features: int
+    kernel_size: int
+    stride: int = 1
+
+    @nn.compact
+    def __call__(self, x):
+        k = self.kernel_size
+        kernel = self.param("kernel", nn.initializers.lecun_normal(),
+                            (k, k, x.shape[-1], self.features))
+        bias = self.param("bias", nn.initializers.zeros_init(), (self.features,))
+        return conv_transpose_valid(x, kernel, self.stride) + bias

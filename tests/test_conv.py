@@ -1,0 +1,69 @@
+"""roll_jax/conv.py against flax's nn.Conv / nn.ConvTranspose: values and gradients."""
+import dataclasses
+
+import flax.linen as nn
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from configs.encoders import scene_vae_config
+from roll_jax import conv, encoders
+
+# (input size, in channels, out channels, kernel, stride): the ConvVAE's layers and odd cases
+CONVS = [(48, 3, 16, 5, 3), (15, 16, 32, 3, 2), (7, 32, 64, 3, 2), (9, 2, 3, 4, 1)]
+DECONVS = [(3, 64, 32, 3, 2), (7, 32, 16, 3, 2), (15, 16, 3, 6, 3), (4, 2, 3, 2, 3), (5, 3, 2, 5, 1)]
+
+
+def _compare(ref, new, x):
+    params = ref.init(jax.random.PRNGKey(1), x)
+    # random biases too: flax initialises them to zero
+    params = jax.tree.map(lambda p: jax.random.normal(jax.random.PRNGKey(2), p.shape), params)
+    cot = jax.random.normal(jax.random.PRNGKey(3), jax.eval_shape(ref.apply, params, x).shape)
+
+    @jax.jit
+    def values_and_grads(p, x):  # one compiled program per module: eager dispatch is slow
+        return (ref.apply(p, x), new.apply(p, x),
+                jax.grad(lambda p, x: jnp.vdot(ref.apply(p, x), cot), argnums=(0, 1))(p, x),
+                jax.grad(lambda p, x: jnp.vdot(new.apply(p, x), cot), argnums=(0, 1))(p, x))
+
+    y_ref, y_new, g_ref, g_new = values_and_grads(params, x)
+    assert y_ref.shape == y_new.shape
+    np.testing.assert_allclose(y_new, y_ref, rtol=1e-5, atol=1e-5)
+    for g_new, g_ref in zip(jax.tree.leaves(g_new), jax.tree.leaves(g_ref)):
+        np.testing.assert_allclose(g_new, g_ref, rtol=1e-4, atol=1e-4)
+
+
+@pytest.mark.parametrize("h,cin,cout,k,s", CONVS)
+def test_conv_matches_flax(h, cin, cout, k, s):
+    x = jax.random.normal(jax.random.PRNGKey(0), (3, h, h + 1, cin))
+    _compare(nn.Conv(cout, (k, k), strides=(s, s), padding="VALID"), conv.Conv(cout, k, s), x)
+
+
+@pytest.mark.parametrize("h,cin,cout,k,s", DECONVS)
+def test_conv_transpose_matches_flax(h, cin, cout, k, s):
+    x = jax.random.normal(jax.random.PRNGKey(0), (3, h, h + 2, cin))
+    _compare(nn.ConvTranspose(cout, (k, k), strides=(s, s), padding="VALID"),
+             conv.ConvTranspose(cout, k, s), x)
+
+
+def test_vae_impls_share_parameters_and_values():
+    fast = scene_vae_config("puck_push")
+    slow = dataclasses.replace(fast, conv_impl="lax")
+    state = encoders.init_vae(jax.random.PRNGKey(0), fast)
+    assert (jax.tree.structure(state.params)
+            == jax.tree.structure(encoders.init_vae(jax.random.PRNGKey(0), slow).params))
+    images = jax.random.randint(jax.random.PRNGKey(4), (4, 48, 48, 3), 0, 256).astype(jnp.uint8)
+    np.testing.assert_allclose(encoders.encode_mean(state.params, fast, images),
+                               encoders.encode_mean(state.params, slow, images),
+                               rtol=1e-5, atol=1e-6)
+    z = jax.random.normal(jax.random.PRNGKey(5), (4, fast.latent_dim))
+    np.testing.assert_allclose(encoders.decode(state.params, fast, z),
+                               encoders.decode(state.params, slow, z), rtol=1e-5, atol=1e-5)
+
+
+def test_bad_conv_impl_and_channels_refused():
+    with pytest.raises(ValueError, match="conv_impl"):
+        dataclasses.replace(scene_vae_config("puck_push"), conv_impl="fft")
+    with pytest.raises(ValueError, match="4 channels"):
+        conv.conv_valid(jnp.zeros((1, 8, 8, 4)), jnp.zeros((3, 3, 3, 2)), 1)
