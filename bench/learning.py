@@ -39,7 +39,7 @@ def summarize(rows: list[dict], target: float) -> dict:
     """Curve figures of metrics rows: median / IQR over seeds per evaluation, the area under
     the median curve (trapezoid, in metre x env steps, and as the mean distance over the run),
     the first env step where the median is <= target, the step-0 and final medians."""
-    from roll_jax.train import seed_quantiles
+    from roll_jax.plots import seed_quantiles
 
     steps, med, q25, q75 = seed_quantiles(rows)
     hit = [int(s) for s, m in zip(steps, med) if m <= target]
@@ -68,32 +68,32 @@ def main(argv=None) -> dict:
     p.add_argument("--enc-ckpt", default=None, help="pretrained encoders to reuse")
     a = p.parse_args(argv)
     name = a.name or f"{a.algo}_{a.preset}"
-    run_dir = a.run_dir or os.path.join(ROOT, "runs", f"learning_{name}")
+    out_dir = a.run_dir or os.path.join(ROOT, "runs", f"learning_{name}")
 
     import jax
 
-    from roll_jax import compile_cache, train
+    from roll_jax import compile_cache, run_dir, train
 
     compile_cache.use(compile_cache.default_dir())
     cfg = train.build_config(a.task, a.algo, a.preset, seeds=a.seeds, overrides=a.set)
-    resume = os.path.exists(os.path.join(run_dir, "config.json"))
+    resume = os.path.exists(os.path.join(out_dir, "config.json"))
     load0 = os.getloadavg()
     t0 = time.perf_counter()
-    if train.is_complete(run_dir):  # summarise the finished run (its timings.json as written)
-        train.check_resume(run_dir, cfg)
-        rows = train.read_rows(os.path.join(run_dir, "metrics.csv"), cfg.total_env_steps, True)
+    if train.is_complete(out_dir):  # summarise the finished run (its timings.json as written)
+        train.check_resume(out_dir, cfg)
+        rows = run_dir.read_rows(os.path.join(out_dir, "metrics.csv"), cfg.total_env_steps, True)
     else:
-        rows = train.run(cfg, run_dir, resume=resume, seed=a.seed, seg_ckpt=a.seg_ckpt,
+        rows = train.run(cfg, out_dir, resume=resume, seed=a.seed, seg_ckpt=a.seg_ckpt,
                          enc_ckpt=a.enc_ckpt)
     wall = time.perf_counter() - t0
-    with open(os.path.join(run_dir, "timings.json")) as f:
+    with open(os.path.join(out_dir, "timings.json")) as f:
         timings = json.load(f)
     out = {"name": name, "task": a.task, "algo": a.algo, "preset": a.preset, "seeds": cfg.seeds,
            "seed": a.seed, "overrides": a.set, "resumed": resume,
            "seg_ckpt": a.seg_ckpt, "enc_ckpt": a.enc_ckpt,
            "command": "python bench/learning.py " + " ".join(argv if argv is not None
                                                              else sys.argv[1:]),
-           "config": train._config_json(cfg), "curve": summarize(rows, a.target),
+           "config": run_dir.config_json(cfg), "curve": summarize(rows, a.target),
            "wall_s": round(wall, 1), "timings": timings,
            "machine": {"device": str(jax.devices()[0]), "cpu_count": os.cpu_count(),
                        "platform": platform.machine(), "jax": jax.__version__,
@@ -103,7 +103,7 @@ def main(argv=None) -> dict:
     path = os.path.join(RESULTS, f"learning_{name}.json")
     with open(path, "w") as f:
         json.dump(out, f, indent=2)
-    shutil.copy(os.path.join(run_dir, "plots", "learning_curve.png"),
+    shutil.copy(os.path.join(out_dir, "plots", "learning_curve.png"),
                 os.path.join(RESULTS, f"learning_{name}.png"))
     c = out["curve"]
     for s, m, lo, hi in zip(c["env_steps"], c["median"], c["q25"], c["q75"]):

@@ -15,7 +15,7 @@
                and of every stored frame, object-VAE means of the segmented frames, the LSTM over
                each episode and the episode's prior goal (object-VAE prior -> one LSTM step);
      log_p     Skew-Fit's importance-sampled log p(x) of every stored frame under the scene-VAE
-               (`loop.frame_log_p`, skew_num_latents decodes per frame), when loop.py has it;
+               (`skewfit.frame_log_p`, skew_num_latents decodes per frame);
      policy    the acting policy (sac.select_action, batch n_envs) per step;
      SAC       `loop.sac_updates`: epoch_env_steps x updates_per_step updates at the config's
                batch size on the replay buffer the timed chunks filled;
@@ -60,15 +60,12 @@ import jax.numpy as jnp
 import envs_mjx
 from configs.presets import PRESETS
 from configs.train import make_config
-from roll_jax import encoders, loop, sac, sharding
+from roll_jax import encoders, loop, sac, sharding, skewfit
 from roll_jax.goal_encoding import Frozen, goal_encoder
 from roll_jax.segmentation import mog2, pipeline, unet
 
 RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "train.json")
-# The chunk computes Skew-Fit's log p(x) of every stored frame when loop.py has `frame_log_p`.
-HAS_LOG_P = hasattr(loop, "frame_log_p")
-PARTS = ("sim", "render", "segment", "encoders") + (("log_p",) if HAS_LOG_P else ()) + (
-    "policy", "sac")
+PARTS = ("sim", "render", "segment", "encoders", "log_p", "policy", "sac")
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -165,6 +162,57 @@ def fresh_frozen_and_pretrained(cfg, key):
     return Frozen(seg=seg, object_vae=object_vae.params), scene_vae, lstm
 
 
+def _sac_share(with_sac: float, without_sac: float, n_updates: int) -> dict:
+    sac_s = with_sac - without_sac
+    return {"chunk_s": with_sac, "chunk_without_sac_s": without_sac, "sac_s": sac_s,
+            "sac_updates": n_updates, "sac_ms_per_update": 1e3 * sac_s / n_updates,
+            "chunk_over_sac": with_sac / sac_s if sac_s > 0 else float("inf")}
+
+
+def sac_share_in_chunk(task: str, preset: str, first_epoch: int = 20, seeds: int = 1) -> dict:
+    """The chunk `train.py --preset PRESET` compiles (the preset's replay size and schedules),
+    timed over one refresh cycle of steady-state plans (epochs `first_epoch` onwards: LSTM
+    rounds, cached-latent refreshes as a run has them) with the plans' SAC on and off: the
+    difference is the cost of the SAC updates inside the chunk (HER sampling, prior goals,
+    gathers included)."""
+    a = argparse.Namespace(task=task, preset=preset, replay_size=None, chunks=1,
+                           n_envs=None, epoch_env_steps=None)
+    base = make_config(task, "roll", preset)
+    a.n_envs, a.epoch_env_steps = base.n_envs, base.epoch_env_steps
+    cfg = make_cfg(a, seeds)
+    env = envs_mjx.make(task)
+    k_fz, k_init = jax.random.split(jax.random.PRNGKey(0))
+    frozen, scene_vae, lstm = fresh_frozen_and_pretrained(cfg, k_fz)
+    state = jax.jit(jax.vmap(lambda k: loop.init_state(k, cfg, env, scene_vae, lstm)))(
+        jax.random.split(k_init, seeds))
+    plans = [loop.plan_chunk(cfg, e)
+             for e in range(first_epoch, first_epoch + cfg.refresh_every_epochs)]
+    chunk = loop.compile_chunk(cfg, env, 1, sharding.resolve_seed_batch("auto", seeds))
+    compiled, lower_s, compile_s = _compile(chunk, state, frozen, plans[0])
+    print(f"  {task} {preset} chunk: trace+lower {lower_s:.1f} s, compile {compile_s:.1f} s",
+          flush=True)
+    (state, _), first, _ = _call(compiled, state, frozen, plans[0])
+    means = {}
+    for name in ("on", "off"):
+        walls = []
+        for pl in plans:
+            pl = pl if name == "on" else pl.replace(learn=jnp.bool_(False))
+            (state, _), w, _ = _call(compiled, state, frozen, pl)
+            walls.append(w)
+        means[name] = statistics.mean(walls)
+        print(f"  SAC {name}: chunks {[round(w, 2) for w in walls]} s", flush=True)
+    n_updates = cfg.epoch_env_steps * cfg.sac.updates_per_step
+    res = _sac_share(means["on"], means["off"], n_updates)
+    res.update(lower_s=lower_s, compile_s=compile_s, first_chunk_s=first,
+               sac_hidden=list(cfg.sac.hidden), sac_batch_size=cfg.sac.batch_size,
+               replay_size=cfg.sac.replay_size, sac_schedule=cfg.sac_schedule,
+               epochs_timed=[first_epoch, first_epoch + len(plans) - 1],
+               plans=[{k: v.item() for k, v in vars(pl).items()} for pl in plans])
+    print(f"  SAC in the chunk: {res['sac_ms_per_update']:.2f} ms per update; chunk / its SAC "
+          f"{res['chunk_over_sac']:.2f}", flush=True)
+    return res
+
+
 # ----------------------------------------------------------------------------- the parts
 
 def part_functions(cfg, env, frozen):
@@ -222,7 +270,7 @@ def part_functions(cfg, env, frozen):
 
     def log_p_one(scene_params, rgb, key):  # rgb [ep, E, T+1, ...]
         def episode(_, xs):
-            return None, loop.frame_log_p(cfg, scene_params, *xs)
+            return None, skewfit.frame_log_p(cfg, scene_params, *xs)
 
         return jax.lax.scan(episode, None, (rgb, jax.random.split(key, n_ep)))[1]
 
@@ -301,14 +349,24 @@ def bench_seeds(a, seeds: int, env) -> dict:
               f"{'  (warm-up, not in steady state)' if i == 0 else ''}", flush=True)
     finite = bool(all(jnp.all(jnp.isfinite(x)) for x in jax.tree.leaves(metrics)))
     steady = times[1:]
+    # The same compiled chunk without SAC: what the chunk spends on its own updates.
+    no_learn = plan.replace(learn=jnp.bool_(False))
+    off = []
+    for i in range(a.chunks):
+        (state, _), w, _ = _call(compiled, state, frozen, no_learn)
+        off.append(w)
+    sac_share = _sac_share(statistics.median(steady), statistics.median(off[1:]), n_updates)
     chunk_res = {"seed_batch": seed_batch, "lower_s": lower_s, "compile_s": compile_s,
                  "first_chunk_s": times[0],
                  "steady_chunk_times_s": steady, "steady_chunk_median_s": statistics.median(steady),
                  "steady_chunk_min_s": min(steady), "steady_chunk_cpu_times_s": cpus[1:],
                  "steady_chunk_cpu_median_s": statistics.median(cpus[1:]),
-                 "metrics_finite": finite,
+                 "metrics_finite": finite, "without_sac": sac_share,
                  "env_steps_per_s": steps_per_chunk / statistics.median(steady),
                  "env_steps_per_s_per_seed": cfg.epoch_env_steps / statistics.median(steady)}
+    print(f"  chunk without SAC {sac_share['chunk_without_sac_s']:.2f} s: SAC in the chunk "
+          f"{sac_share['sac_ms_per_update']:.2f} ms per update, chunk / its SAC "
+          f"{sac_share['chunk_over_sac']:.2f}", flush=True)
     print(f"  chunk steady state: median {chunk_res['steady_chunk_median_s']:.2f} s -> "
           f"{chunk_res['env_steps_per_s']:.1f} env steps/s ({seeds} seeds), "
           f"{chunk_res['env_steps_per_s_per_seed']:.1f} per seed", flush=True)
@@ -325,9 +383,8 @@ def bench_seeds(a, seeds: int, env) -> dict:
     parts["encoders"], _ = _time_part(
         "encoders", fns["encoders"],
         (frozen, state.scene_vae.params, lstm_params, rgb, goal_imgs, keys[1]), a.reps)
-    if HAS_LOG_P:
-        parts["log_p"], _ = _time_part("log_p", fns["log_p"],
-                                       (state.scene_vae.params, rgb, keys[2]), a.reps)
+    parts["log_p"], _ = _time_part("log_p", fns["log_p"],
+                                   (state.scene_vae.params, rgb, keys[2]), a.reps)
     ep, t = cfg.episodes_per_epoch, cfg.horizon
     z_steps = jax.random.normal(keys[2, 0], (seeds, ep, t, cfg.n_envs, cfg.scene.latent_dim))
     goals = jax.random.normal(keys[2, 1], (seeds, ep, cfg.n_envs, enc.goal_dim))

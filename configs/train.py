@@ -215,3 +215,28 @@ def make_config(task: str, algo: str = "roll", preset: str = "paper", **override
         values["lstm"] = dataclasses.replace(values["lstm"],
                                              out_dim=values["scene_vae"].latent_dim)
     return TrainConfig(task=task, algo=algo, preset=preset, **values)
+
+
+def _tuples(x):
+    """JSON lists back to the tuples the configs hold (nested: e.g. LSTM schedules)."""
+    return tuple(_tuples(v) for v in x) if isinstance(x, list) else x
+
+
+def config_from_json(values: dict) -> TrainConfig:
+    """The TrainConfig a run wrote to its config.json (`dataclasses.asdict` as JSON)."""
+    import typing
+
+    hints = typing.get_type_hints(TrainConfig)
+    names = {f.name for f in dataclasses.fields(TrainConfig)}
+    unknown = set(values) - names
+    if unknown:
+        raise ValueError(f"config.json: unknown TrainConfig field(s) {sorted(unknown)}")
+    fields = {}
+    for name, value in values.items():
+        # `X | None` fields: the dataclass among the union's members
+        kinds = [k for k in (typing.get_args(hints[name]) or (hints[name],))
+                 if dataclasses.is_dataclass(k)]
+        if kinds and isinstance(value, dict):
+            value = kinds[0](**{k: _tuples(v) for k, v in value.items()})
+        fields[name] = _tuples(value)
+    return TrainConfig(**fields)

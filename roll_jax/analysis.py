@@ -30,6 +30,7 @@ a checkpoint.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import functools
 import json
 import os
@@ -40,7 +41,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from roll_jax import encoders, losses
+from roll_jax import encoders
 from roll_jax.goal_encoding import Frozen, GoalEncoder, goal_encoder
 from roll_jax.models import lstm_encode
 
@@ -91,7 +92,7 @@ def spearman(x, y) -> float:
 
 # ============================================================================ helpers
 
-def _batched(fn: Callable, x, chunk: int = 512):
+def batched(fn: Callable, x, chunk: int = 512):
     """fn over the leading axis of x in fixed-size chunks (the last one padded, so fn compiles
     at most once); returns a numpy array."""
     x = np.asarray(x)
@@ -272,10 +273,10 @@ def model_encoders(cfg, pre, seg, chunk: int = 512) -> tuple[Callable, Callable]
     lstm_params = None if pre.lstm is None else pre.lstm.params
 
     def encode_scene(rgb):
-        return _batched(lambda x: _scene_encode(scene_params, cfg.scene, x), rgb, chunk)
+        return batched(lambda x: _scene_encode(scene_params, cfg.scene, x), rgb, chunk)
 
     def encode_object(rgb):
-        return _batched(lambda x: _object_encode(enc, frozen, scene_params, lstm_params, x),
+        return batched(lambda x: _object_encode(enc, frozen, scene_params, lstm_params, x),
                         rgb, chunk)
 
     return encode_scene, encode_object
@@ -337,23 +338,15 @@ def render_pushes(env, puck, hand, chunk: int = 256) -> np.ndarray:
     def run(x):
         return jax.vmap(lambda r: env.render(env.place(r[:3], r[3:])))(x)
 
-    return _batched(run, both, chunk).reshape(shape + (48, 48, 3))
+    return batched(run, both, chunk).reshape(shape + (48, 48, 3))
 
 
 def occlude_frames(key, images, masks, drop: float = OCCLUSION_DROP, min_t: int = 1):
-    """Pick t in [min_t, T) per trajectory and drop `drop` of frame t's object pixels.
-
-    images: segmented uint8 [B, T, 48, 48, 3]; masks: bool [B, T, 48, 48] or None (then the
-    non-zero pixels). Returns (t [B], occluded frames [B, 48, 48, 3])."""
-    images = jnp.asarray(images)
-    b, t_len = images.shape[:2]
-    if t_len <= min_t:
-        raise ValueError(f"trajectories of length {t_len} leave no frame t >= {min_t}")
-    k_t, k_occ = jax.random.split(key)
-    t = jax.random.randint(k_t, (b,), min_t, t_len)
-    frames = images[jnp.arange(b), t]
-    m = None if masks is None else jnp.asarray(masks)[jnp.arange(b), t]
-    return np.asarray(t), np.asarray(losses.occlude(k_occ, frames, m, drop))
+    """`encoders.occlusion_frames` as numpy: (t [B], occluded frames [B, 48, 48, 3]) of
+    segmented uint8 images [B, T, 48, 48, 3] with masks [B, T, 48, 48] (or None)."""
+    t, occ = encoders.occlusion_frames(key, jnp.asarray(images),
+                                       None if masks is None else jnp.asarray(masks), min_t, drop)
+    return np.asarray(t), np.asarray(occ)
 
 
 def retrieval_errors(clean_codes, query_codes, positions, occ_t) -> tuple[np.ndarray, np.ndarray]:
@@ -412,18 +405,9 @@ def occlusion_retrieval(key, images, masks, positions, frame_encoder: Callable,
 
 
 # --- the three models --------------------------------------------------------------------
-
-@functools.partial(jax.jit, static_argnames=("cfg", "n_steps", "batch"))
-def _finetune_vae(state, key, images, masks, cfg, n_steps: int, batch: int):
-    n = images.shape[0]
-
-    def body(st, k):
-        k_idx, k_step = jax.random.split(k)
-        idx = jax.random.randint(k_idx, (batch,), 0, n)
-        st, m = encoders.vae_train_step(st, k_step, images[idx], cfg, masks[idx])
-        return st, m["loss"]
-
-    return jax.lax.scan(body, state, jax.random.split(key, n_steps))
+@functools.partial(jax.jit, static_argnames=("cfg",))
+def _finetune_vae(state, key, images, masks, cfg):
+    return encoders.vae_fit_epoch(state, key, images, cfg, masks)
 
 
 def finetune_vae(key, state: encoders.ModelState, cfg, images, masks, n_steps: int,
@@ -434,9 +418,9 @@ def finetune_vae(key, state: encoders.ModelState, cfg, images, masks, n_steps: i
     batch = batch or cfg.batch_size
     hist = []
     for i in range(0, n_steps, chunk):
-        k = min(chunk, n_steps - i)
-        state, l = _finetune_vae(state, jax.random.fold_in(key, i), images, masks, cfg, k, batch)
-        hist.append(np.asarray(l))
+        c = dataclasses.replace(cfg, batch_size=batch, batches_per_epoch=min(chunk, n_steps - i))
+        state, m = _finetune_vae(state, jax.random.fold_in(key, i), images, masks, c)
+        hist.append(np.asarray(m["loss"]))
     return state, (np.concatenate(hist) if hist else np.zeros((0,)))
 
 
@@ -488,7 +472,7 @@ def encode_frames(vae_params, vae_cfg, images, chunk: int = 1024) -> jnp.ndarray
     images = np.asarray(images)
     lead = images.shape[:-3]
     flat = images.reshape((-1,) + images.shape[-3:])
-    z = _batched(lambda x: _scene_encode(vae_params, vae_cfg, x), flat, chunk)
+    z = batched(lambda x: _scene_encode(vae_params, vae_cfg, x), flat, chunk)
     return jnp.asarray(z.reshape(lead + (-1,)))
 
 
@@ -558,20 +542,24 @@ def load_checkpoint(ckpt: str, task: str, preset: str | None = None):
     from roll_jax import pretrain
     from roll_jax.segmentation import pipeline
 
-    if preset is None:
-        meta = os.path.join(ckpt, "pretrain.json")
-        preset = "paper"
-        if os.path.exists(meta):
-            with open(meta) as f:
-                info = json.load(f)
-            if info.get("task") not in (None, task):
-                raise ValueError(f"checkpoint {ckpt} was pretrained for task {info['task']!r}, "
-                                 f"not {task!r}")
-            preset = info.get("preset", preset)
-    cfg = make_config(task, "roll", preset)
+    cfg = make_config(task, "roll", checkpoint_preset(ckpt, task, preset))
     pre = pretrain.load(os.path.join(ckpt, "encoders"), cfg)
     seg, _ = pipeline.load(os.path.join(ckpt, "segmentation"), task)
     return cfg, pre, seg
+
+
+def checkpoint_preset(ckpt: str, task: str | None = None, preset: str | None = None) -> str:
+    """`preset`, or the one a `roll_jax.pretrain --out` directory was made with
+    (DIR/pretrain.json; "paper" without one); refuses a checkpoint of another `task`."""
+    meta = os.path.join(ckpt, "pretrain.json")
+    info = {}
+    if os.path.exists(meta):
+        with open(meta) as f:
+            info = json.load(f)
+    if task is not None and info.get("task") not in (None, task):
+        raise ValueError(f"checkpoint {ckpt} was pretrained for task {info['task']!r}, "
+                         f"not {task!r}")
+    return preset or info.get("preset", "paper")
 
 
 def run_latent_vs_distance(task: str, ckpt: str, out: str, n: int = 500, seed: int = 0,
@@ -587,7 +575,7 @@ def run_latent_vs_distance(task: str, ckpt: str, out: str, n: int = 500, seed: i
     # object's state (position; door: angle).
     enc = goal_encoder(cfg)
     frozen = Frozen(seg=seg, object_vae=pre.object_vae.params)
-    means = _batched(lambda x: _frame_encode(enc, frozen, pre.scene_vae.params, x), obs, 512)
+    means = batched(lambda x: _frame_encode(enc, frozen, pre.scene_vae.params, x), obs, 512)
     scene = encode_scene(obs)  # what the policy sees must locate the object too
     probe = {"object_vae_r2": position_r2(means, pos),
              "object_vae_pairwise_spearman": pairwise_spearman(means, pos),
@@ -623,7 +611,7 @@ def run_occlusion(ckpt: str, out: str, task: str = "hurdle_top", n_train: int = 
     puck, hand = puck_paths(k_path, task, n_train + n_eval, horizon)
     rgb = render_pushes(env, puck, hand)
     seg_fn = jax.jit(lambda x: pipeline.segment(seg, x))
-    masks = _batched(seg_fn, rgb.reshape((-1,) + rgb.shape[2:]), 256).reshape(rgb.shape[:-1])
+    masks = batched(seg_fn, rgb.reshape((-1,) + rgb.shape[2:]), 256).reshape(rgb.shape[:-1])
     images = np.where(masks[..., None], rgb, 0).astype(np.uint8)
     t_data = time.perf_counter() - t0
     tr, ev = slice(0, n_train), slice(n_train, n_train + n_eval)
@@ -693,7 +681,7 @@ def main(argv=None):
         else:
             from configs import presets
 
-            d = presets.get(_ckpt_preset(a.ckpt, a.preset))["occlusion"]
+            d = presets.get(checkpoint_preset(a.ckpt, a.task, a.preset))["occlusion"]
             res = run_occlusion(a.ckpt, out, a.task,
                                 n_train=a.n_train or d["n_train"], n_eval=a.n_eval or d["n_eval"],
                                 horizon=a.horizon,
@@ -703,16 +691,6 @@ def main(argv=None):
     except (FileNotFoundError, ValueError) as e:
         sys.exit(f"error: {e}")
     print(json.dumps(res, indent=2))
-
-
-def _ckpt_preset(ckpt: str, preset: str | None) -> str:
-    if preset:
-        return preset
-    meta = os.path.join(ckpt, "pretrain.json")
-    if os.path.exists(meta):
-        with open(meta) as f:
-            return json.load(f).get("preset", "paper")
-    return "paper"
 
 
 if __name__ == "__main__":

@@ -23,3 +23,47 @@ def read_meta(path: str, what: str) -> tuple[str, dict]:
         raise FileNotFoundError(f"no {what} checkpoint at {path} (missing meta.json)")
     with open(meta_path) as f:
         return path, json.load(f)
+
+
+# --- the training state (a run's ckpt/) ---------------------------------------------------------
+
+def train_state_manager(out: str, keep: int, create: bool = True):
+    """orbax CheckpointManager of a run's train states in `out`/ckpt (keeps the last `keep`)."""
+    import orbax.checkpoint as ocp
+
+    return ocp.CheckpointManager(
+        os.path.abspath(os.path.join(out, "ckpt")),
+        options=ocp.CheckpointManagerOptions(max_to_keep=keep, create=create, read_only=not create))
+
+
+def _saveable(state) -> dict:
+    """The state's leaves by flat index, without zero-size arrays (MJX data has some; orbax
+    refuses them); `_unsaveable` rebuilds them from the abstract state."""
+    import jax
+
+    return {str(i): x for i, x in enumerate(jax.tree.leaves(state)) if x.size}
+
+
+def _unsaveable(abstract, saved: dict):
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    leaves, treedef = jax.tree.flatten(abstract)
+    out = [saved[str(i)] if x.size else np.zeros(x.shape, x.dtype) for i, x in enumerate(leaves)]
+    return jax.tree.unflatten(treedef, [jnp.asarray(x) for x in out])
+
+
+def save_train_state(mgr, epoch: int, state) -> None:
+    import orbax.checkpoint as ocp
+
+    mgr.save(epoch, args=ocp.args.StandardSave(_saveable(state)))
+
+
+def restore_train_state(mgr, abstract):
+    """(epoch, state) of the latest checkpoint, `abstract` giving the state's structure."""
+    import orbax.checkpoint as ocp
+
+    step = mgr.latest_step()
+    saved = mgr.restore(step, args=ocp.args.StandardRestore(_saveable(abstract)))
+    return step, _unsaveable(abstract, saved)

@@ -159,23 +159,32 @@ def init_lstm(key: jax.Array, cfg: LSTMConfig, in_dim: int) -> ModelState:
     return _init_lstm(key, lstm_model(cfg), in_dim, cfg.lr)
 
 
-def make_occlusion(key: jax.Array, vae_params: Any, vae_cfg: VAEConfig, images: jax.Array,
-                   cfg: LSTMConfig, object_masks: jax.Array | None = None) -> Occlusion:
-    """Pick t in [cfg.min_occlusion_t, T) per trajectory of images [B, T, 48, 48, 3], drop
-    cfg.occlusion_drop of frame t's object pixels and encode it with the frozen object-VAE."""
+def occlusion_frames(key: jax.Array, images: jax.Array, object_masks: jax.Array | None,
+                     min_t: int, drop: float) -> tuple[jax.Array, jax.Array]:
+    """Pick t in [min_t, T) per trajectory of images [B, T, 48, 48, 3] and drop `drop` of
+    frame t's object pixels (`object_masks` [B, T, 48, 48], or None: the non-zero pixels).
+    Returns (t [B], occluded frames [B, 48, 48, 3])."""
     check_images(images)
     if images.ndim != 5:
         raise ValueError(f"images must be [B, T, 48, 48, 3], got shape {tuple(images.shape)}")
     b, t_len = images.shape[:2]
-    if t_len <= cfg.min_occlusion_t:
+    if t_len <= min_t:
         raise ValueError(f"trajectories of length {t_len} leave no frame t >= "
-                         f"min_occlusion_t={cfg.min_occlusion_t} to occlude")
+                         f"min_occlusion_t={min_t} to occlude")
     _check_masks(object_masks, images)
     k_t, k_occ = jax.random.split(key)
-    t = jax.random.randint(k_t, (b,), cfg.min_occlusion_t, t_len)
+    t = jax.random.randint(k_t, (b,), min_t, t_len)
     frames = images[jnp.arange(b), t]
     masks = None if object_masks is None else object_masks[jnp.arange(b), t]
-    occluded = losses.occlude(k_occ, frames, masks, cfg.occlusion_drop)
+    return t, losses.occlude(k_occ, frames, masks, drop)
+
+
+def make_occlusion(key: jax.Array, vae_params: Any, vae_cfg: VAEConfig, images: jax.Array,
+                   cfg: LSTMConfig, object_masks: jax.Array | None = None) -> Occlusion:
+    """`occlusion_frames` at the LSTM config's `min_occlusion_t` and `occlusion_drop`, the
+    occluded frame encoded with the frozen object-VAE."""
+    t, occluded = occlusion_frames(key, images, object_masks, cfg.min_occlusion_t,
+                                   cfg.occlusion_drop)
     latent = jax.lax.stop_gradient(encode_mean(vae_params, vae_cfg, occluded))
     return Occlusion(t=t, latent=latent)
 

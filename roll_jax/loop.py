@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import collections
 import functools
-import math
 from typing import Any
 
 import jax
@@ -35,9 +34,8 @@ import numpy as np
 from flax import struct
 
 from configs.train import TrainConfig, vae_schedule
-from roll_jax import encoders, replay, sac
+from roll_jax import encoders, online_training, replay, sac, skewfit
 from roll_jax.goal_encoding import Frozen, GoalEncoder, goal_encoder
-from roll_jax.models import ConvVAE, to_float
 
 TRACE_COUNTS: collections.Counter = collections.Counter()
 
@@ -322,7 +320,7 @@ def collect_episode(cfg: TrainConfig, env, enc: GoalEncoder, frozen: Frozen, sta
         images=images, object_images=goal_imgs, actions=actions[:, :n_train].swapaxes(0, 1),
         obs_latents=obs, frame_latents=frame_lat, goal_latents=achieved, rollout_goals=goals)
     if needs_log_p(cfg, enc):
-        log_p = frame_log_p(cfg, scene_params, images, k_lp)
+        log_p = skewfit.frame_log_p(cfg, scene_params, images, k_lp)
     else:
         log_p = jnp.zeros(images.shape[:2], jnp.float32)
     final_dist = jnp.sum(jnp.square(achieved[:, -1] - goals), -1)
@@ -364,7 +362,7 @@ def sac_steps(cfg: TrainConfig, enc: GoalEncoder, sac_state: sac.SACState,
 def _skew_cdf_of(cfg: TrainConfig, enc: GoalEncoder, state: TrainState):
     if not enc.skewed_goals:
         return None
-    return skew_cdf(state.skew_log_p, cfg.skew_alpha, state.buffer.size)
+    return skewfit.skew_cdf(state.skew_log_p, cfg.skew_alpha, state.buffer.size)
 
 
 def sac_updates(cfg: TrainConfig, enc: GoalEncoder, state: TrainState, key, n_updates: int,
@@ -386,61 +384,6 @@ def zero_sac_metrics(cfg: TrainConfig, enc: GoalEncoder, state: TrainState, prio
     return m
 
 
-def log_likelihood(cfg: TrainConfig, params, images, key):
-    """Skew-Fit's importance-sampled log p(x) under the VAE (Gaussian identity-variance
-    decoder), with cfg.skew_num_latents samples of q(z|x)."""
-    model = encoders.vae_model(cfg.scene)
-    mean, logvar = model.apply(params, images, method=ConvVAE.encode)
-    k = cfg.skew_num_latents
-    eps = jax.random.normal(key, (k,) + mean.shape)
-    z = mean + jnp.exp(0.5 * logvar) * eps  # [K, B, d]
-    recon = model.apply(params, z, method=ConvVAE.decode)
-    x = to_float(images)
-    log_px_z = -0.5 * jnp.sum(jnp.square(recon - x), axis=(-3, -2, -1))
-    log_pz = -0.5 * jnp.sum(jnp.square(z), -1)
-    log_qz = -0.5 * jnp.sum(jnp.square(eps) + logvar, -1)
-    return jax.nn.logsumexp(log_px_z + log_pz - log_qz, axis=0) - math.log(k)
-
-
-def frame_log_p(cfg: TrainConfig, params, images, key, batch_size: int = 256):
-    """`log_likelihood` of every image [..., H, W, 3] -> [...], one key per image, batched."""
-    lead = images.shape[:-3]
-    flat = images.reshape((-1,) + images.shape[-3:])
-    n = flat.shape[0]
-    keys = jax.random.split(key, n)
-    log_p = jax.lax.map(lambda xk: log_likelihood(cfg, params, xk[0][None], xk[1])[0],
-                        (flat, keys), batch_size=min(batch_size, n))
-    return log_p.reshape(lead)
-
-
-def skew_weights(log_p, alpha: float, valid):
-    """Skew-Fit sampling weights p(x)^alpha over the buffer, normalised (log-space; invalid
-    slots get 0, all zeros when no slot is valid)."""
-    logw = jnp.where(valid, alpha * log_p, -jnp.inf)
-    w = jax.nn.softmax(logw.reshape(-1)).reshape(log_p.shape)
-    return jnp.where(valid, w, 0.0)  # softmax of all -inf is NaN
-
-
-def filled_frames(log_p, size):
-    """bool [N, T+1]: frames of the first `size` trajectory slots (the filled ones)."""
-    n, t1 = log_p.shape
-    return jnp.broadcast_to((jnp.arange(n) < size)[:, None], (n, t1))
-
-
-def skew_cdf(log_p, alpha: float, size):
-    """Cumulative Skew-Fit weights over the flattened buffer frames [N * (T+1)] (all zeros for
-    an empty buffer): built once per phase so each draw is a binary search, not a
-    categorical over the whole buffer."""
-    return jnp.cumsum(skew_weights(log_p, alpha, filled_frames(log_p, size)).reshape(-1))
-
-
-def sample_frames(key, cdf, n: int):
-    """n flat frame indices drawn with probability cdf[i] - cdf[i-1] (inverse CDF)."""
-    u = jax.random.uniform(key, (n,)) * cdf[-1]
-    # side="right": a zero-weight frame (cdf[i] == cdf[i-1]) is never hit.
-    return jnp.minimum(jnp.searchsorted(cdf, u, side="right"), cdf.shape[0] - 1)
-
-
 def fresh_goals(enc: GoalEncoder, buffer: replay.ReplayBuffer, cdf, lstm_params, key, n: int,
                 prior=None):
     """n goals for exploration and for the fresh-goal share of HER relabeling.
@@ -458,87 +401,10 @@ def fresh_goals(enc: GoalEncoder, buffer: replay.ReplayBuffer, cdf, lstm_params,
     if not enc.skewed_goals:
         return enc.prior_goals(key, lstm_params, n, prior)
     k_prior, k_buf = jax.random.split(key)
-    flat = sample_frames(k_buf, cdf, n)
+    flat = skewfit.sample_frames(k_buf, cdf, n)
     t1 = buffer.goal_latents.shape[1]
     replay_goals = buffer.goal_latents[flat // t1, flat % t1]
     return jnp.where(buffer.size > 0, replay_goals, enc.prior_goals(k_prior, lstm_params, n))
-
-
-def train_scene_vae(cfg: TrainConfig, state: TrainState, key, n_batches):
-    """`n_batches` scene-VAE steps on replay images drawn with Skew-Fit weights (from the
-    stored log p(x) under the current VAE), then log p(x) of the whole buffer under the
-    trained VAE (rlkit recomputes its priorities after training too)."""
-    buf = state.buffer
-    k_lp, k_train = jax.random.split(key)
-    weights = skew_weights(state.skew_log_p, cfg.skew_alpha,
-                           filled_frames(state.skew_log_p, buf.size))
-
-    def body(i, carry):
-        vs, loss = carry
-        k_s, k_step = jax.random.split(jax.random.fold_in(k_train, i))
-        imgs = replay.sample_images(buf, k_s, cfg.vae_online_batch, weights)
-        vs, m = encoders.vae_train_step(vs, k_step, imgs, cfg.scene)
-        return vs, loss + m["loss"]
-
-    vs, loss_sum = jax.lax.fori_loop(0, n_batches, body, (state.scene_vae, jnp.float32(0)))
-    log_p = frame_log_p(cfg, vs.params, buf.images, k_lp)
-    return (state.replace(scene_vae=vs, skew_log_p=log_p),
-            {"vae_loss": loss_sum / jnp.maximum(n_batches, 1)})
-
-
-def online_occlusion(cfg: TrainConfig, enc: GoalEncoder, frozen: Frozen, scene_params, key,
-                     goal_images):
-    """The occluded frame per trajectory of goal images [B, T, H, W, 3] that an online LSTM
-    step's matching loss compares (encoders.Occlusion, encoded now by the frame encoder);
-    None when the matching loss is ablated. The clean frames' latents come from the buffer's
-    cache (`frame_latents`)."""
-    if not cfg.matching_loss:
-        return None
-    if enc.object_cfg is not None:
-        params, frame_cfg = frozen.object_vae, enc.object_cfg
-    else:
-        params, frame_cfg = scene_params, enc.scene_cfg
-    return encoders.make_occlusion(key, params, frame_cfg, goal_images, cfg.lstm)
-
-
-def train_lstm(cfg: TrainConfig, enc: GoalEncoder, frozen: Frozen, state: TrainState, key,
-               n_batches):
-    """`n_batches` online LSTM steps on trajectories drawn uniformly from the buffer: the
-    auto-encoder loss, plus the matching loss unless ablated."""
-
-    def body(i, carry):
-        s, loss = carry
-        k_s, k_occ, k_step = jax.random.split(jax.random.fold_in(key, i), 3)
-        tr = replay.sample_trajectories(s.buffer, k_s, cfg.lstm.online_batch_size)
-        occ = online_occlusion(cfg, enc, frozen, s.scene_vae.params, k_occ, tr.object_images)
-        ls, m = encoders.lstm_train_step(s.lstm, k_step, tr.frame_latents, cfg.lstm, occ)
-        return s.replace(lstm=ls), loss + m["loss"]
-
-    state, loss_sum = jax.lax.fori_loop(0, n_batches, body, (state, jnp.float32(0)))
-    return state, {"lstm_loss": loss_sum / jnp.maximum(n_batches, 1)}
-
-
-REFRESH_CHUNK = 64  # episodes encoded at a time when the buffer's latents are recomputed
-
-
-def refresh_scene(cfg: TrainConfig, enc: GoalEncoder, state: TrainState):
-    """After scene-VAE training: the buffer's scene latents, and its frame latents where the
-    scene-VAE encodes the goal frames (the same images: no-object-VAE, Skew-Fit)."""
-    params = state.scene_vae.params
-    buf = replay.recompute(state.buffer, "obs_latents", lambda x: scene_latents(cfg, params, x),
-                           state.buffer.images, REFRESH_CHUNK)
-    if enc.object_cfg is None:
-        buf = buf.replace(frame_latents=buf.obs_latents)
-    return state.replace(buffer=buf)
-
-
-def refresh_goals(enc: GoalEncoder, state: TrainState):
-    """The buffer's goal latents from its cached frame latents (the LSTM over each episode;
-    no image is encoded: the frame latents change only with `refresh_scene`)."""
-    lstm_params = None if state.lstm is None else state.lstm.params
-    buf = replay.recompute(state.buffer, "goal_latents", lambda e: enc.sequence(lstm_params, e),
-                           state.buffer.frame_latents, REFRESH_CHUNK)
-    return state.replace(buffer=buf)
 
 
 # ----------------------------------------------------------------------------- the chunk
@@ -589,8 +455,8 @@ def make_chunk(cfg: TrainConfig, env):
             metrics["vae_loss"] = jnp.float32(0)
         else:
             def vae_round(s):
-                s, m = train_scene_vae(cfg, s, k_vae, plan.vae_batches)
-                return refresh_scene(cfg, enc, s), m
+                s, m = online_training.train_scene_vae(cfg, s, k_vae, plan.vae_batches)
+                return online_training.refresh_scene(cfg, enc, s), m
 
             state, vae_m = jax.lax.cond(plan.vae_batches > 0, vae_round,
                                         lambda s: (s, {"vae_loss": jnp.float32(0)}), state)
@@ -598,11 +464,11 @@ def make_chunk(cfg: TrainConfig, env):
         if enc.lstm:
             state, lstm_m = jax.lax.cond(
                 plan.lstm_batches > 0,
-                lambda s: train_lstm(cfg, enc, frozen, s, k_lstm, plan.lstm_batches),
+                lambda s: online_training.train_lstm(cfg, enc, frozen, s, k_lstm, plan.lstm_batches),
                 lambda s: (s, {"lstm_loss": jnp.float32(0)}), state)
             metrics.update(lstm_m)
         if not enc.oracle:
-            state = jax.lax.cond(plan.refresh_goals, lambda s: refresh_goals(enc, s),
+            state = jax.lax.cond(plan.refresh_goals, lambda s: online_training.refresh_goals(enc, s),
                                  lambda s: s, state)
         state = state.replace(key=key, epoch=state.epoch + 1, last_train={
             k: metrics[k].astype(jnp.float32) for k in train_metric_keys(cfg)})

@@ -188,17 +188,3 @@ def sample_trajectories(buffer: ReplayBuffer, key, n: int) -> Trajectory:
     """n stored episodes drawn uniformly with replacement (online LSTM training)."""
     traj = jax.random.randint(key, (n,), 0, jnp.maximum(buffer.size, 1))
     return Trajectory(**{name: getattr(buffer, name)[traj] for name in _TRAJ_FIELDS})
-
-
-def sample_images(buffer: ReplayBuffer, key, n: int, weights=None) -> jax.Array:
-    """n stored scene images uint8 [n, H, W, 3], uniform or with probability ∝ weights.
-
-    weights: [N, T+1] non-negative (e.g. Skew-Fit's p(x)^alpha over the buffer); unfilled slots
-    are never drawn whatever their weight.
-    """
-    n_traj, t1 = buffer.images.shape[:2]
-    filled = jnp.broadcast_to((jnp.arange(n_traj) < buffer.size)[:, None], (n_traj, t1))
-    w = jnp.ones((n_traj, t1), jnp.float32) if weights is None else jnp.asarray(weights, jnp.float32)
-    logits = jnp.where(filled & (w > 0), jnp.log(jnp.where(w > 0, w, 1.0)), -jnp.inf)
-    flat = jax.random.categorical(key, logits.reshape(-1), shape=(n,))
-    return buffer.images[flat // t1, flat % t1]

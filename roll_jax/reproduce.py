@@ -30,7 +30,8 @@ import time
 
 from configs.overrides import parse_overrides
 from configs.train import ALGOS, PRESETS, TASKS
-from roll_jax import train
+from roll_jax import plots, train
+from roll_jax.run_dir import read_rows
 
 ABLATION_TASK = "hurdle_top"
 # variant -> (algo, ablation flags for build_config)
@@ -214,14 +215,16 @@ def _use_cache(path: str) -> None:
 
 
 def _run_cell(cfg, out: str, resume: bool, seg_ckpt: str, seed: int, devices, seed_batch,
-              cache: str):
-    """One cell in a worker process (spawned: a fresh JAX), sharing the compilation cache."""
-    _use_cache(cache)
-    from roll_jax import train as train_mod
-
+              progress: bool = False, run_fn=None, cache: str | None = None) -> float:
+    """One cell: `train.run` (or a test's stand-in `run_fn`) with the grid's shared
+    pre-training; returns its seconds. `cache`: the compilation cache a worker process
+    (spawned: a fresh JAX) sets up first."""
+    if cache is not None:
+        _use_cache(cache)
+    run_fn = train.run if run_fn is None else run_fn
     t0 = time.time()
-    train_mod.run(cfg, out, resume=resume, seg_ckpt=seg_ckpt, seed=seed, devices=devices,
-                  seed_batch=seed_batch, pretrain_cache=pretrain_dir(out), progress=False)
+    run_fn(cfg, out, resume=resume, seg_ckpt=seg_ckpt, seed=seed, devices=devices,
+           seed_batch=seed_batch, pretrain_cache=pretrain_dir(out), progress=progress)
     return time.time() - t0
 
 
@@ -245,14 +248,11 @@ def run_grid(cells: list[Cell], a, run_fn=None, pool=None) -> dict[str, str]:
     if jobs <= 1:
         if run_fn is None:
             _use_cache(cache)
-            run_fn = train.run
         for c, tag, what in todo:
             print(f"{tag}: {'resuming' if what == 'resume' else 'starting'} in {c.out}", flush=True)
-            t0 = time.time()
-            run_fn(c.cfg, c.out, resume=what == "resume", seg_ckpt=seg_dir(c), seed=a.seed,
-                   devices=a.devices, seed_batch=a.seed_batch,
-                   pretrain_cache=pretrain_dir(c.out), progress=True)
-            print(f"{tag}: done in {time.time() - t0:.0f} s", flush=True)
+            seconds = _run_cell(c.cfg, c.out, what == "resume", seg_dir(c), a.seed, a.devices,
+                                a.seed_batch, progress=True, run_fn=run_fn)
+            print(f"{tag}: done in {seconds:.0f} s", flush=True)
             done[c.out] = "resumed" if what == "resume" else "ran"
         return done
 
@@ -264,10 +264,7 @@ def run_grid(cells: list[Cell], a, run_fn=None, pool=None) -> dict[str, str]:
 
         pool = functools.partial(cf.ProcessPoolExecutor,
                                  mp_context=multiprocessing.get_context("spawn"))
-    if run_fn is None:
-        run_fn = functools.partial(_run_cell, cache=cache)
-    else:
-        run_fn = functools.partial(_call_run_fn, run_fn)
+    run_fn = functools.partial(_run_cell, run_fn=run_fn, cache=cache if run_fn is None else None)
     info = {c.out: (tag, what) for c, tag, what in todo}
     queue, releases = schedule([c for c, _, _ in todo])
     t_grid = time.time()
@@ -296,30 +293,21 @@ def run_grid(cells: list[Cell], a, run_fn=None, pool=None) -> dict[str, str]:
     return done
 
 
-def _call_run_fn(run_fn, cfg, out, resume, seg_ckpt, seed, devices, seed_batch):
-    t0 = time.time()
-    run_fn(cfg, out, resume=resume, seg_ckpt=seg_ckpt, seed=seed, devices=devices,
-           seed_batch=seed_batch, pretrain_cache=pretrain_dir(out), progress=False)
-    return time.time() - t0
-
-
 # ----------------------------------------------------------------------------- report
 
 def read_metrics(path: str) -> list[dict]:
-    with open(path) as f:
-        return [{k: (int(float(v)) if k in ("seed", "env_steps") else float(v))
-                 for k, v in r.items()} for r in csv.DictReader(f)]
+    return read_rows(path, 2**62)  # every row
 
 
 def final_stats(rows: list[dict], key: str = METRIC) -> dict:
     """median / 25th / 75th percentile over seeds at the last evaluated env step."""
-    steps, med, lo, hi = train.seed_quantiles(rows, key)
+    steps, med, lo, hi = plots.seed_quantiles(rows, key)
     return {"env_steps": int(steps[-1]), "seeds": sum(int(r["env_steps"] == steps[-1]) for r in rows),
             "median": float(med[-1]), "q25": float(lo[-1]), "q75": float(hi[-1])}
 
 
 def _panels(n: int):
-    plt = train.pyplot()
+    plt = plots.pyplot()
     cols = min(n, 3)
     rows = -(-n // cols)
     fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.3 * rows), squeeze=False)
@@ -334,7 +322,7 @@ def figure4(curves: dict[str, dict[str, list[dict]]], path: str) -> None:
     for ax, (task, by_algo) in zip(axes, curves.items()):
         for variant, rows in by_algo.items():
             if rows:
-                train.plot_median_band(ax, rows, LABELS.get(variant, variant))
+                plots.plot_median_band(ax, rows, LABELS.get(variant, variant))
         if not any(by_algo.values()):
             ax.text(0.5, 0.5, "no results yet", ha="center", va="center", transform=ax.transAxes)
         ax.set_title(task)
@@ -349,7 +337,7 @@ def ablation_figure(by_variant: dict[str, list[dict]], path: str) -> None:
     plt, fig, (ax,) = _panels(1)
     for variant, rows in by_variant.items():
         if rows:
-            train.plot_median_band(ax, rows, LABELS.get(variant, variant))
+            plots.plot_median_band(ax, rows, LABELS.get(variant, variant))
     ax.set_title(f"ablations on {ABLATION_TASK} (median, 25-75%)")
     ax.legend(fontsize=7)
     fig.tight_layout()

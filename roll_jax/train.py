@@ -12,40 +12,23 @@ sharded over them. A finished run gets `COMPLETE_MARKER` (complete.json), writte
 from __future__ import annotations
 
 import contextlib
-import csv
 import dataclasses
 import json
 import os
 import time
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from configs.overrides import parse_overrides
 from configs.train import TrainConfig
-from roll_jax import loop, pretrain
+from roll_jax import loop, pretrain, plots, run_dir
 from roll_jax import sharding as shd
+from roll_jax.checkpoint import restore_train_state, save_train_state, train_state_manager
+from roll_jax.run_dir import COMPLETE_MARKER, is_complete  # noqa: F401 (the driver's API)
 from roll_jax.goal_encoding import Frozen, goal_encoder
 
 LOSS_KEYS = ("q_loss", "policy_loss", "alpha_loss", "vae_loss", "lstm_loss")
-COMPLETE_MARKER = "complete.json"
-
-
-def is_complete(out: str) -> bool:
-    """The run in `out` reached its last epoch (run() writes the marker last)."""
-    return os.path.exists(os.path.join(out, COMPLETE_MARKER))
-
-
-def _write_atomic(path: str, text: str) -> None:
-    tmp = f"{path}.tmp{os.getpid()}"
-    with open(tmp, "w") as f:
-        f.write(text)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
-
-
 class TrainingDiverged(RuntimeError):
     pass
 
@@ -92,10 +75,6 @@ class PhaseTimes:
         return {"wall_s": self.wall, "cpu_s": self.cpu}
 
 
-def _config_json(cfg: TrainConfig) -> dict:
-    return json.loads(json.dumps(dataclasses.asdict(cfg)))
-
-
 def build_config(task: str, algo: str, preset: str, seeds: int = 1, overrides=(),
                  matching_loss: bool = True, use_lstm: bool = True,
                  use_object_vae: bool = True) -> TrainConfig:
@@ -135,7 +114,7 @@ def check_resume(out: str, cfg: TrainConfig) -> None:
         raise ValueError(f"--resume: no run to resume in {out} (missing config.json)")
     with open(path) as f:
         saved = json.load(f)
-    now = _config_json(cfg)
+    now = run_dir.config_json(cfg)
     diff = [k for k in sorted(set(saved) | set(now)) if saved.get(k) != now.get(k)]
     if diff:
         k = diff[0]
@@ -151,6 +130,12 @@ def setup(cfg: TrainConfig, env, key, out: str, seg_ckpt=None, enc_ckpt=None, pr
     times = PhaseTimes() if times is None else times
     enc = goal_encoder(cfg)
     k_seg, k_pre = jax.random.split(key)
+    # A checkpoint the caller names must exist: fitting a fresh one in its place would hide
+    # a wrong path behind minutes of pretraining.
+    for name, path in (("seg_ckpt", seg_ckpt), ("enc_ckpt", enc_ckpt)):
+        if path is not None and not os.path.exists(os.path.join(path, "meta.json")):
+            raise FileNotFoundError(f"{name}={path!r} is not a checkpoint directory (no "
+                                    f"meta.json in it)")
     seg = None
     with times("segmentation"):
         if enc.segment:
@@ -188,111 +173,6 @@ def init_states(cfg: TrainConfig, env, keys, pre: pretrain.Pretrained,
     return jax.jit(init, out_shardings=sharding.seeds)(sharding.shard(keys))
 
 
-def _manager(out: str, cfg: TrainConfig):
-    import orbax.checkpoint as ocp
-
-    return ocp.CheckpointManager(
-        os.path.abspath(os.path.join(out, "ckpt")),
-        options=ocp.CheckpointManagerOptions(max_to_keep=cfg.keep_checkpoints, create=True))
-
-
-def _saveable(state) -> dict:
-    """The state's leaves by flat index, without zero-size arrays (MJX data has some; orbax
-    refuses them); `_unsaveable` rebuilds them from the abstract state."""
-    return {str(i): x for i, x in enumerate(jax.tree.leaves(state)) if x.size}
-
-
-def _unsaveable(abstract, saved: dict):
-    leaves, treedef = jax.tree.flatten(abstract)
-    out = [saved[str(i)] if x.size else np.zeros(x.shape, x.dtype) for i, x in enumerate(leaves)]
-    return jax.tree.unflatten(treedef, [jnp.asarray(x) for x in out])
-
-
-def _save(mgr, epoch: int, state) -> None:
-    import orbax.checkpoint as ocp
-
-    mgr.save(epoch, args=ocp.args.StandardSave(_saveable(state)))
-
-
-def _restore(mgr, abstract):
-    import orbax.checkpoint as ocp
-
-    step = mgr.latest_step()
-    saved = mgr.restore(step, args=ocp.args.StandardRestore(_saveable(abstract)))
-    return step, _unsaveable(abstract, saved)
-
-
-def write_gif(path: str, video, goal) -> None:
-    """Observation (left) beside the goal image (right), 4x upscaled, as an animated GIF."""
-    from PIL import Image
-
-    frames = []
-    for f in np.asarray(video):
-        pair = np.concatenate([f, np.full((f.shape[0], 2, 3), 255, np.uint8), np.asarray(goal)], 1)
-        frames.append(Image.fromarray(pair).resize((pair.shape[1] * 4, pair.shape[0] * 4),
-                                                   Image.NEAREST))
-    frames[0].save(path, save_all=True, append_images=frames[1:], duration=80, loop=0)
-
-
-def seed_quantiles(rows: list[dict], key: str = "final_distance"):
-    """Per env step over seeds: (steps, median, 25th, 75th percentile) as numpy arrays."""
-    steps = sorted({r["env_steps"] for r in rows})
-    vals = [[r[key] for r in rows if r["env_steps"] == s] for s in steps]
-    return (np.asarray(steps), np.asarray([np.median(v) for v in vals]),
-            np.asarray([np.percentile(v, 25) for v in vals]),
-            np.asarray([np.percentile(v, 75) for v in vals]))
-
-
-def plot_median_band(ax, rows: list[dict], label: str, key: str = "final_distance", **kw) -> None:
-    """Median over seeds with the 25-75% band (the paper's Fig. 4 style) on `ax`."""
-    steps, med, lo, hi = seed_quantiles(rows, key)
-    if len(steps) <= 20:  # few evaluations: mark them; a single one shows its band as a bar
-        kw = {"marker": "o", "markersize": 3, **kw}
-    (line,) = ax.plot(steps, med, label=label, **kw)
-    ax.fill_between(steps, lo, hi, alpha=0.25, color=line.get_color())
-    if len(steps) == 1:
-        ax.errorbar(steps, med, yerr=[med - lo, hi - med], color=line.get_color(), capsize=3)
-    ax.set_xlabel("env steps")
-    ax.set_ylabel(key.replace("_", " "))
-
-
-def pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def learning_curve(rows: list[dict], path: str, title: str) -> None:
-    """The run's plot: median over seeds with the 25-75% band (the paper's Fig. 4 style)."""
-    plt = pyplot()
-    fig, ax = plt.subplots(figsize=(4.5, 3.2))
-    plot_median_band(ax, rows, "median over seeds (band 25-75%)")
-    ax.set_title(title)
-    ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-
-
-INT_COLUMNS = ("env_steps", "seed")  # metrics.csv columns that are ints; the rest are floats
-
-
-def read_rows(csv_path: str, keep: int, final: bool = False) -> list[dict]:
-    """The metrics.csv rows a resumed run keeps: those before env step `keep` (the checkpoint),
-    and the rows at `keep` too when `final` (a finished run's final evaluation). env_steps and
-    seed come back as ints (as `run` logs them), the other columns as floats."""
-    def parse(r: dict) -> dict:
-        # int(float(.)): also reads the "500.0" a resumed run used to write.
-        return {k: int(float(v)) if k in INT_COLUMNS else float(v) for k, v in r.items()}
-
-    with open(csv_path) as f:
-        rows = [parse(r) for r in csv.DictReader(f)]
-    return [r for r in rows if r["env_steps"] < keep or (final and r["env_steps"] == keep)]
-
-
 def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None = None,
         enc_ckpt: str | None = None, seed: int = 0, progress: bool = True,
         stop_after_epochs: int | None = None, devices="all", seed_batch="auto",
@@ -319,8 +199,8 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
         marker = os.path.join(out, COMPLETE_MARKER)
         if os.path.exists(marker):  # being redone or continued: not complete until the end
             os.remove(marker)
-        with open(os.path.join(out, "config.json"), "w") as f:
-            json.dump(_config_json(cfg), f, indent=2)
+        run_dir.write_config(out, cfg)
+        run_dir.write_inputs(out, seg_ckpt, enc_ckpt)
 
     times = PhaseTimes()  # this process's phases -> timings.json
     t_run, c_run = time.perf_counter(), time.process_time()
@@ -333,7 +213,7 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
         state = jax.block_until_ready(init_seeds(cfg, env, k_init, pre, sharding))
     if sharding is not None:
         frozen = sharding.replicate(frozen)
-    mgr = _manager(out, cfg)
+    mgr = train_state_manager(out, cfg.keep_checkpoints)
     rows: list[dict] = []
     csv_path = os.path.join(out, "metrics.csv")
     start_epoch = 0
@@ -342,11 +222,11 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
         # written on another device count restores onto this one.
         abstract = jax.tree.map(
             lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=x.sharding), state)
-        start_epoch, state = _restore(mgr, abstract)
+        start_epoch, state = restore_train_state(mgr, abstract)
         if sharding is not None:
             state = sharding.shard(state)
         # Rows of the chunks before the checkpoint; a finished run's final evaluation too.
-        rows = read_rows(csv_path, start_epoch * cfg.epoch_env_steps,
+        rows = run_dir.read_rows(csv_path, start_epoch * cfg.epoch_env_steps,
                          final=start_epoch == cfg.n_epochs)
     chunk = loop.compile_chunk(cfg, env, n_devices, per_device)
     if sharding is not None:
@@ -362,13 +242,10 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
             row.update({k: float(v[s]) for k, v in ev["train"].items()})
             rows.append(row)
         if main:
-            write_gif(os.path.join(out, "videos", f"eval_{env_steps:08d}.gif"),
-                      ev["video"][0], ev["goal_image"][0])
-            with open(csv_path, "w", newline="") as f:
-                w = csv.DictWriter(f, fieldnames=list(rows[0]))
-                w.writeheader()
-                w.writerows(rows)
-            learning_curve(rows, os.path.join(out, "plots", "learning_curve.png"),
+            run_dir.write_gif(os.path.join(out, "videos", f"eval_{env_steps:08d}.gif"),
+                              ev["video"][0], ev["goal_image"][0])
+            run_dir.write_rows(csv_path, rows)
+            plots.learning_curve(rows, os.path.join(out, "plots", "learning_curve.png"),
                            f"{cfg.task} ({cfg.algo}, {cfg.seeds} seeds)")
 
     end_epoch = cfg.n_epochs if stop_after_epochs is None else min(cfg.n_epochs, stop_after_epochs)
@@ -385,7 +262,7 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
         if epoch % cfg.eval_every_epochs == 0:
             log_evaluation(epoch * cfg.epoch_env_steps, metrics["eval"])
         if (epoch + 1) % cfg.eval_every_epochs == 0 or epoch + 1 == cfg.n_epochs:
-            _save(mgr, epoch + 1, state)
+            save_train_state(mgr, epoch + 1, state)
             now = time.perf_counter()
             rate = (env_steps - steps_last) * cfg.seeds / max(now - t_last, 1e-9)
             t_last, steps_last = now, env_steps
@@ -407,7 +284,7 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
             json.dump({**times.as_dict(), "total_wall_s": round(time.perf_counter() - t_run, 2),
                        "total_cpu_s": round(time.process_time() - c_run, 2)}, f, indent=2)
     if main and end_epoch == cfg.n_epochs:
-        _write_atomic(os.path.join(out, COMPLETE_MARKER), json.dumps(
+        run_dir.write_atomic(os.path.join(out, COMPLETE_MARKER), json.dumps(
             {"env_steps": cfg.total_env_steps, "seeds": cfg.seeds, "task": cfg.task,
              "algo": cfg.algo, "devices": n_devices, "seed_batch": per_device},
             indent=2))

@@ -5,7 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from roll_jax import replay
+from roll_jax import replay, skewfit
 
 CAP, T, HW, A, DS, DG = 6, 5, 8, 2, 3, 2
 FRACS = (0.2, 0.5, 0.3)
@@ -35,7 +35,7 @@ def _buffer():
 # Jitted once: eager op-by-op dispatch costs more than compiling on this CPU.
 add = jax.jit(replay.add_trajectories)
 draw = jax.jit(replay.draw_indices, static_argnums=2)
-sample_images = jax.jit(replay.sample_images, static_argnums=2)
+sample_images = jax.jit(skewfit.sample_images, static_argnums=2)
 
 
 def test_ring_insertion_wraps_and_size_saturates():
@@ -170,9 +170,10 @@ def test_sample_trajectories_and_images():
     assert imgs.shape == (200, HW, HW, 3) and set(px // 10) <= {0, 1, 2}
     # Skewed: all weight on (episode 1, step 4) plus weight on an unfilled slot (never drawn).
     w = jnp.zeros((CAP, T + 1)).at[1, 4].set(1.0).at[5, 0].set(100.0)
-    imgs = sample_images(buf, jax.random.key(2), 50, w)
+    imgs = sample_images(buf, jax.random.key(2), 50, skewfit.weights_cdf(w, buf.size))
     np.testing.assert_array_equal(imgs[:, 0, 0, 0], 14)
     # Proportional: weights 3:1 between two images.
     w = jnp.zeros((CAP, T + 1)).at[0, 0].set(3.0).at[2, 5].set(1.0)
-    px = np.asarray(sample_images(buf, jax.random.key(3), 4000, w)[:, 0, 0, 0])
+    px = np.asarray(sample_images(buf, jax.random.key(3), 4000,
+                                  skewfit.weights_cdf(w, buf.size))[:, 0, 0, 0])
     assert set(px) == {0, 25} and abs(np.mean(px == 0) - 0.75) < 0.03

@@ -8,7 +8,7 @@ import os
 import numpy as np
 import pytest
 
-from roll_jax import reproduce, train
+from roll_jax import reproduce, run_dir, train
 
 
 class FakeRun:
@@ -22,7 +22,7 @@ class FakeRun:
                            "seg_ckpt": seg_ckpt, "devices": devices, "use_lstm": cfg.use_lstm})
         os.makedirs(out, exist_ok=True)
         with open(os.path.join(out, "config.json"), "w") as f:
-            json.dump(train._config_json(cfg), f)
+            json.dump(run_dir.config_json(cfg), f)
         _write_metrics(out, {1000: [0.5] * cfg.seeds})
         with open(os.path.join(out, train.COMPLETE_MARKER), "w") as f:
             f.write("{}")
@@ -112,7 +112,7 @@ def test_skips_finished_resumes_unfinished(tmp_path):
     started = cells[("hurdle_top", "roll")]
     os.makedirs(started.out)
     with open(os.path.join(started.out, "config.json"), "w") as f:
-        json.dump(train._config_json(started.cfg), f)
+        json.dump(run_dir.config_json(started.cfg), f)
 
     fake = FakeRun()
     assert reproduce.main(argv, run_fn=fake) == 0

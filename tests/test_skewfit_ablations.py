@@ -14,7 +14,7 @@ from scipy import stats
 
 from configs.encoders import VAEConfig
 from configs.train import make_config
-from roll_jax import encoders, loop, losses, replay
+from roll_jax import encoders, loop, losses, online_training, replay, skewfit
 from roll_jax.goal_encoding import Frozen, GoalEncoder, goal_encoder
 from roll_jax.checkpoint import write_meta
 
@@ -45,11 +45,11 @@ def _np_weights(log_p, alpha, size):
 @pytest.mark.parametrize("alpha, size", [(-1.0, 3), (-0.5, CAP), (-1.0, 0)])
 def test_skew_weights_match_numpy(alpha, size):
     log_p = np.random.default_rng(0).normal(-50.0, 3.0, (CAP, T1)).astype(np.float32)
-    valid = loop.filled_frames(jnp.asarray(log_p), size)
-    w = np.asarray(loop.skew_weights(jnp.asarray(log_p), alpha, valid))
+    valid = skewfit.filled_frames(jnp.asarray(log_p), size)
+    w = np.asarray(skewfit.skew_weights(jnp.asarray(log_p), alpha, valid))
     np.testing.assert_allclose(w, _np_weights(log_p, alpha, size), rtol=1e-5, atol=1e-12)
     assert np.all(w[size:] == 0)  # empty slots are never drawn
-    cdf = np.asarray(loop.skew_cdf(jnp.asarray(log_p), alpha, size))
+    cdf = np.asarray(skewfit.skew_cdf(jnp.asarray(log_p), alpha, size))
     np.testing.assert_allclose(cdf, np.cumsum(w), rtol=1e-5, atol=1e-7)
 
 
@@ -62,7 +62,7 @@ def test_skewed_goal_frequencies_match_weights():
     size, alpha, n = 3, -1.0, 40_000
     log_p = np.random.default_rng(1).normal(0.0, 1.0, (CAP, T1)).astype(np.float32)
     buf = _buffer(size)
-    cdf = loop.skew_cdf(jnp.asarray(log_p), alpha, size)
+    cdf = skewfit.skew_cdf(jnp.asarray(log_p), alpha, size)
     goals = np.asarray(_fresh(SKEWFIT, buf, cdf, jax.random.PRNGKey(0), n))
     assert np.all(goals[:, 1] == 0)
     counts = np.bincount(goals[:, 0].astype(int), minlength=CAP * T1)
@@ -78,7 +78,7 @@ def test_fresh_goals_fall_back_to_prior_per_seed():
     one gives buffer frames; ROLL's goals stay the prior whatever the buffer holds."""
     log_p = jnp.zeros((CAP, T1))
     bufs = jax.tree.map(lambda a, b: jnp.stack([a, b]), _buffer(0), _buffer(2))
-    cdfs = jax.vmap(lambda b: loop.skew_cdf(log_p, -1.0, b.size))(bufs)
+    cdfs = jax.vmap(lambda b: skewfit.skew_cdf(log_p, -1.0, b.size))(bufs)
     goals = np.asarray(jax.vmap(lambda b, c: loop.fresh_goals(SKEWFIT, b, c, None,
                                                               jax.random.PRNGKey(3), 4000))(bufs, cdfs))
     empty, filled = goals
@@ -164,7 +164,7 @@ def _lstm_loss(cfg, enc, lstm_params, vae_params, images):
     lstm_train_step's loss), differentiable in the LSTM and in the frame encoder's parameters."""
     frozen = Frozen(seg=None, object_vae=vae_params if enc.object_cfg is not None else None)
     lat = enc.frame_latents(frozen, vae_params, images)  # the buffer's cached latents
-    occ = loop.online_occlusion(cfg, enc, frozen, vae_params, jax.random.PRNGKey(5), images)
+    occ = online_training.online_occlusion(cfg, enc, frozen, vae_params, jax.random.PRNGKey(5), images)
     return losses.lstm_loss(lstm_params, encoders.lstm_model(cfg.lstm), lat,
                             None if occ is None else occ.latent, None if occ is None else occ.t,
                             matching_coef=cfg.lstm.matching_coef, ae_coef=cfg.lstm.ae_coef,

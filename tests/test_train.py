@@ -12,7 +12,7 @@ import pytest
 from configs.sac import SACConfig
 from configs.segmentation import segmentation_config
 from configs.train import make_config
-from roll_jax import loop, sharding, train
+from roll_jax import loop, run_dir, sharding, train
 
 
 def tiny(**kw):
@@ -174,20 +174,20 @@ def test_read_rows_keeps_int_columns(tmp_path):
             return f.read()
 
     text = write(written)
-    kept = train.read_rows(path, 1000)
+    kept = run_dir.read_rows(path, 1000)
     assert kept == written[:4]  # before the checkpoint at 1000 env steps
     assert all(type(r["env_steps"]) is int and type(r["seed"]) is int for r in kept)
     assert all(type(r["final_distance"]) is float for r in kept)
-    assert train.read_rows(path, 1000, final=True) == written  # a finished run: the last eval too
+    assert run_dir.read_rows(path, 1000, final=True) == written  # a finished run: the last eval too
     # Rewriting the restored rows gives the same file (no "500.0" among "1000").
-    assert write(train.read_rows(path, 1000, final=True)) == text
+    assert write(run_dir.read_rows(path, 1000, final=True)) == text
     assert "500.0" not in text
     # A file an earlier resume wrote with float env steps reads back as ints.
     legacy = text.replace("\n500,", "\n500.0,").replace("\n0,", "\n0.0,")
     assert "\n500.0," in legacy and "\n0.0," in legacy
     with open(path, "w", newline="") as f:
         f.write(legacy)
-    assert train.read_rows(path, 1000, final=True) == written
+    assert run_dir.read_rows(path, 1000, final=True) == written
 
 
 def test_check_finite_stops_on_a_nan_gradient_with_finite_losses():
@@ -200,3 +200,116 @@ def test_check_finite_stops_on_a_nan_gradient_with_finite_losses():
         train.check_finite(bad_grad, 500, 0, "/ckpt")
     with pytest.raises(train.TrainingDiverged, match="q_loss is nan for seed 0 at env step 1000"):
         train.check_finite({**ok, "q_loss": np.array([np.nan, 0.1])}, 1000, 1, "/ckpt")
+
+
+# --- python -m roll_jax.evaluate on the run's checkpoint ---------------------------------------
+
+def _tree_snapshot(root):
+    return sorted((os.path.relpath(os.path.join(d, f), root), os.path.getmtime(os.path.join(d, f)),
+                   os.path.getsize(os.path.join(d, f)))
+                  for d, _, files in os.walk(root) for f in files)
+
+
+def test_evaluate_writes_outputs_and_is_deterministic(runs, tmp_path):
+    from PIL import Image
+
+    from roll_jax import evaluate
+
+    _cfg, full, *_ = runs
+    before = _tree_snapshot(full)
+    summary = evaluate.main(["--run", full, "--n-goals", "2", "--out", str(tmp_path / "sampled")])
+    assert summary["checkpoint_epoch"] == 2 and summary["seeds"] == 2
+    for name in ("evaluation.json", "goal_00.png", "goal_01_seed1.gif", "final_01_seed0.png"):
+        assert os.path.exists(tmp_path / "sampled" / name), name
+    dist = np.array([g["final_distance"] for g in summary["goals"]])
+    assert dist.shape == (2, 2) and np.all(np.isfinite(dist)) and np.all(dist >= 0)
+    # A user's goal image of another size: resized (noted), and the same image twice gives
+    # the same distances.
+    big = Image.open(tmp_path / "sampled" / "goal_00.png").resize((96, 96))
+    big.save(tmp_path / "goal.png")
+    loaded = evaluate.load_run(full)
+    img, note = evaluate.read_goal_image(str(tmp_path / "goal.png"))
+    assert img.shape == (48, 48, 3) and "96x96" in note
+    first = evaluate.evaluate(loaded, [img], 1)
+    again = evaluate.evaluate(loaded, [img], 1)
+    np.testing.assert_array_equal(first["latent_distance"], again["latent_distance"])
+    assert "final_distance" not in first  # no goal state behind a user's image
+    assert _tree_snapshot(full) == before  # nothing in the run directory was written
+
+
+def test_evaluate_refuses_bad_input(runs, tmp_path, capsys):
+    import shutil
+
+    from PIL import Image
+
+    from roll_jax import evaluate
+
+    _cfg, full, *_ = runs
+    Image.new("L", (48, 48)).save(tmp_path / "gray.png")
+    Image.new("RGBA", (48, 48)).save(tmp_path / "rgba.png")
+    (tmp_path / "text.png").write_text("not an image")
+    for name, msg in (("gray.png", "1 channel(s)"), ("rgba.png", "4 channel(s)"),
+                      ("text.png", "not an image")):
+        with pytest.raises(SystemExit):
+            evaluate.main(["--run", full, "--goal-image", str(tmp_path / name),
+                           "--out", str(tmp_path / "o")])
+        assert msg in capsys.readouterr().err, name
+    bare = tmp_path / "bare"
+    bare.mkdir()
+    with pytest.raises(FileNotFoundError, match="no config.json"):
+        evaluate.load_run(str(bare))
+    shutil.copy(os.path.join(full, "config.json"), bare / "config.json")
+    with pytest.raises(FileNotFoundError, match="no checkpoint"):
+        evaluate.load_run(str(bare))
+    other = tmp_path / "other_enc"
+    shutil.copytree(os.path.join(full, "encoders"), other)
+    meta = json.loads((other / "meta.json").read_text())
+    (other / "meta.json").write_text(json.dumps({**meta, "task": "hurdle_top"}))
+    with pytest.raises(ValueError, match="task='hurdle_top'"):
+        evaluate.load_run(full, enc_ckpt=str(other))
+    with pytest.raises(SystemExit):
+        evaluate.main(["--run", full, "--out", os.path.join(full, "eval")])
+    assert "inside the run directory" in capsys.readouterr().err
+
+
+def test_run_records_its_inputs(runs):
+    _cfg, full, _rows, part, *_ = runs
+    with open(os.path.join(part, run_dir.INPUTS)) as f:
+        inputs = json.load(f)
+    assert inputs == {"seg_ckpt": os.path.join(full, "segmentation"),
+                      "enc_ckpt": os.path.join(full, "encoders")}
+    with pytest.raises(FileNotFoundError, match="enc_ckpt"):
+        train.setup(_cfg, None, jax.random.PRNGKey(0), part, enc_ckpt=os.path.join(part, "nope"))
+
+
+def test_reward_encoder_correlations_rank_what_the_encoder_sees():
+    from roll_jax import reward_encoders
+
+    rng = np.random.default_rng(0)
+    d_obj, d_hand = rng.uniform(0, 0.2, 64), rng.uniform(0, 0.2, 64)
+    a = np.zeros((64, 48, 48, 3), np.uint8)
+    b = np.broadcast_to((d_obj * 1000).astype(np.uint8)[:, None, None, None], a.shape).copy()
+    r = reward_encoders.correlations(lambda x: x.reshape(x.shape[0], -1)[:, :1].astype(
+        np.float32), (a, b, d_obj, d_hand))
+    assert r["spearman_object"] > 0.99 and abs(r["spearman_hand"]) < 0.3
+
+
+def test_reward_encoders_command(runs, tmp_path):
+    from roll_jax import reward_encoders
+
+    _cfg, full, *_ = runs
+    summary = reward_encoders.main(["--run", full, "--n", "16", "--out", str(tmp_path)])
+    (row,) = summary["runs"]
+    assert row["label"] == "roll" and -1 <= row["spearman_object"] <= 1
+    assert np.isfinite(row["spearman_hand"])
+    assert os.path.exists(tmp_path / "reward_encoders.png")
+
+
+def test_config_json_round_trip():
+    from configs.train import config_from_json
+
+    for cfg in (tiny(), make_config("hurdle_top", "skewfit", "cpu"),
+                make_config("door_open", "roll", "paper", use_lstm=False)):
+        assert config_from_json(run_dir.config_json(cfg)) == cfg
+    with pytest.raises(ValueError, match="unknown TrainConfig field"):
+        config_from_json({**run_dir.config_json(tiny()), "bogus": 1})

@@ -1,0 +1,287 @@
+"""Roofline of the encoders and SAC on this machine: time, hand-counted FLOPs, and the fraction
+of the matmul rate measured in the same process.
+
+1. matmul: a 2048 x 2048 float32 `jnp.dot` (2 * 2048^3 FLOPs), the machine's reference rate;
+2. scene-VAE train step (batch 64, Table 3) and object-VAE train step (batch 128, matching
+   loss on occluded copies), each with the convolutions of roll_jax/conv.py ("matmul", the
+   default) and with XLA's ("lax"), side by side;
+3. U-Net train step (the cpu preset's width 8 and the paper preset's 16 at batch 32) with the
+   kernel gradient as dots (`dot_wgrad`, the CPU default) and with XLA's, and inference;
+4. SAC update standalone on a fixed batch: the cpu preset's 128-128 at batch 256, the paper's
+   400-300 at batch 1024;
+5. (--chunk) SAC per update inside the cpu-preset ROLL chunk: the same compiled chunk run with
+   the plan's `learn` on and off (`loop.ChunkPlan`, an un-batched switch), the difference
+   divided by its updates; HER sampling, prior goals through the LSTM and the gathers
+   included.
+
+Every step runs inside a jitted `lax.scan` (how training runs them), timed after a warm-up,
+best of several calls.
+
+FLOPs are counted by hand from the architecture (multiply-adds x 2; elementwise work,
+BatchNorm, Adam and the losses are not counted):
+- a VALID conv of a k x k kernel, Cin -> Cout, with an Ho x Wo output: Ho*Wo*k*k*Cin*Cout
+  MACs; a transposed conv from an H x W input: H*W*k*k*Cin*Cout; dense: in*out;
+- a train step is 3x its forward (forward, input gradients, weight gradients); the
+  object-VAE's matching loss adds the encoder on the occluded batch (3x);
+- U-Net: each 3x3 conv at the resolution of its block (48 at inc/up4, /2 per level);
+- SAC update per sample: critic (policy forward on s', target twin-Q forward, twin-Q forward
+  + backward: P + 2Q + 6Q) and actor (policy forward + backward, twin-Q forward + input
+  gradient: 3P + 4Q): 4P + 12Q MACs, P and Q the MLPs' MACs per sample.
+
+    python bench/roofline.py [--chunk] [--quick]
+
+Writes bench/results/roofline.json.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import importlib.util
+import json
+import math
+import os
+import platform
+import statistics
+import sys
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+
+import jax
+import jax.numpy as jnp
+
+from configs.encoders import object_vae_config, scene_vae_config
+from configs.sac import SACConfig
+from configs.segmentation import SegmentationConfig
+from roll_jax import encoders, sac
+from roll_jax.models import _CONV, _DECONV, _FEATURE_MAP, IMAGE_SHAPE
+from roll_jax.segmentation import unet
+
+RESULTS = os.path.join(ROOT, "bench", "results", "roofline.json")
+TASK = "puck_push"
+
+
+def _best(fn, *args, min_time: float = 1.0, repeats: int = 3) -> tuple[float, float]:
+    """(first call incl. compile s, best s per call) of a jitted fn."""
+    t0 = time.perf_counter()
+    jax.block_until_ready(fn(*args))
+    first = time.perf_counter() - t0
+    best, total, n = float("inf"), 0.0, 0
+    while n < repeats or (total < min_time and n < 20):
+        t0 = time.perf_counter()
+        jax.block_until_ready(fn(*args))
+        dt = time.perf_counter() - t0
+        best, total, n = min(best, dt), total + dt, n + 1
+    return first, best
+
+
+def _row(name: str, seconds: float, flops: float, peak: float, **extra) -> dict:
+    rate = flops / seconds / 1e9
+    row = {"ms": 1e3 * seconds, "gflop": flops / 1e9, "gflop_per_s": rate,
+           "fraction_of_matmul": rate / peak, **extra}
+    print(f"  {name:38s} {row['ms']:9.2f} ms  {row['gflop']:8.4f} GFLOP  {rate:7.1f} GFLOP/s  "
+          f"{100 * row['fraction_of_matmul']:5.1f}% of matmul", flush=True)
+    return row
+
+
+# ----------------------------------------------------------------------------- FLOP counts
+
+def vae_macs(latent_dim: int, feature_dim: int) -> dict:
+    """Multiply-adds per image of the ConvVAE (roll_jax/models.py) by layer group."""
+    h, cin, enc = IMAGE_SHAPE[0], IMAGE_SHAPE[2], 0
+    for f, k, s in _CONV:
+        h = (h - k) // s + 1
+        enc += h * h * k * k * cin * f
+        cin = f
+    flat = math.prod(_FEATURE_MAP)
+    heads = flat * feature_dim + 2 * feature_dim * latent_dim
+    dec = latent_dim * flat
+    h, cin = _FEATURE_MAP[0], _FEATURE_MAP[2]
+    for f, k, s in _DECONV:
+        dec += h * h * k * k * cin * f
+        h, cin = (h - 1) * s + k, f
+    return {"encoder": enc + heads, "decoder": dec}
+
+
+def unet_macs(params, height: int) -> int:
+    """Multiply-adds per image of the U-Net: every conv kernel at its block's resolution."""
+    level = {"inc": 0, "down1": 1, "down2": 2, "down3": 3, "down4": 4,
+             "up1": 3, "up2": 2, "up3": 1, "up4": 0, "outc": 0}
+    total = 0
+    for path, leaf in jax.tree_util.tree_flatten_with_path(params)[0]:
+        names = [getattr(p, "key", "") for p in path]
+        if names[-1] == "kernel":
+            res = height // 2 ** level[names[0]]
+            total += res * res * math.prod(leaf.shape)
+    return total
+
+
+def mlp_macs(sizes) -> int:
+    return sum(a * b for a, b in zip(sizes[:-1], sizes[1:]))
+
+
+def sac_update_flops(obs: int, goal: int, act: int, hidden, batch: int) -> float:
+    p = mlp_macs((obs + goal, *hidden, 2 * act))
+    q = mlp_macs((obs + goal + act, *hidden, 1))
+    return 2.0 * batch * (4 * p + 12 * q)
+
+
+# ----------------------------------------------------------------------------- benchmarks
+
+def bench_matmul(n: int = 2048) -> dict:
+    a = jax.random.normal(jax.random.PRNGKey(0), (n, n))
+    b = jax.random.normal(jax.random.PRNGKey(1), (n, n))
+    _, best = _best(jax.jit(jnp.dot), a, b, repeats=5)
+    rate = 2 * n ** 3 / best / 1e9
+    print(f"  matmul {n}x{n} float32: {1e3 * best:.1f} ms, {rate:.1f} GFLOP/s", flush=True)
+    return {"n": n, "ms": 1e3 * best, "gflop_per_s": rate}
+
+
+def _vae_images(key, batch: int, object_like: bool):
+    if not object_like:
+        return jax.random.randint(key, (batch,) + IMAGE_SHAPE, 0, 256).astype(jnp.uint8), None
+    c = jax.random.uniform(key, (batch, 2), minval=8, maxval=40)
+    yy, xx = jnp.mgrid[0:48, 0:48]
+    mask = (yy - c[:, 0, None, None]) ** 2 + (xx - c[:, 1, None, None]) ** 2 <= 25
+    return jnp.where(mask[..., None], jnp.uint8(200), jnp.uint8(0)), mask
+
+
+def bench_vae(cfg, steps: int, peak: float, name: str) -> dict:
+    key = jax.random.PRNGKey(0)
+    images, masks = _vae_images(key, cfg.batch_size, cfg.matching_coef > 0)
+    macs = vae_macs(cfg.latent_dim, cfg.feature_dim)
+    per_image = 3 * (macs["encoder"] + macs["decoder"])
+    if cfg.matching_coef > 0:
+        per_image += 3 * macs["encoder"]
+    flops = 2.0 * per_image * cfg.batch_size
+    out = {}
+    for impl in ("matmul", "lax"):
+        c = dataclasses.replace(cfg, conv_impl=impl)
+        state = encoders.init_vae(key, c)
+
+        @jax.jit
+        def run(state, key, c=c):
+            def body(st, k):
+                return encoders.vae_train_step(st, k, images, c, masks)[0], None
+            return jax.lax.scan(body, state, jax.random.split(key, steps))[0]
+
+        first, best = _best(run, state, key)
+        out[impl] = _row(f"{name} train step ({impl})", best / steps, flops, peak,
+                         batch=cfg.batch_size, compile_and_first_call_s=first)
+    out["speedup_matmul_over_lax"] = out["lax"]["ms"] / out["matmul"]["ms"]
+    return out
+
+
+def bench_unet(features: int, batch: int, steps: int, peak: float) -> dict:
+    cfg = SegmentationConfig()
+    key = jax.random.PRNGKey(0)
+    h = IMAGE_SHAPE[0]
+    state = unet.init_unet(key, features, h, h, cfg)
+    images = jax.random.randint(key, (steps, batch, h, h, 3), 0, 256).astype(jnp.uint8)
+    labels = jax.random.uniform(key, (steps, batch, h, h)) > 0.8
+    macs = unet_macs(state.params, h)
+    out = {"features": features, "batch": batch}
+    for name, dot_wgrad in (("dot_wgrad", True), ("lax", False)):
+        model = unet.UNet(features, dot_wgrad=dot_wgrad)
+
+        @jax.jit
+        def run(state, model=model):
+            def body(st, xy):
+                x, y = xy
+
+                def loss_fn(p):
+                    logits, upd = model.apply({"params": p, "batch_stats": st.batch_stats},
+                                              x.astype(jnp.float32) / 255.0, train=True,
+                                              mutable=["batch_stats"])
+                    return unet.bce_loss(logits, y.astype(jnp.float32)), upd["batch_stats"]
+
+                grads, stats = jax.grad(loss_fn, has_aux=True)(st.params)
+                upd, opt = unet.make_optimizer(cfg).update(grads, st.opt_state, st.params)
+                params = jax.tree.map(lambda p, u: p + u, st.params, upd)
+                return st.replace(params=params, batch_stats=stats, opt_state=opt), None
+            return jax.lax.scan(body, state, (images, labels))[0]
+
+        first, best = _best(run, state)
+        out[f"train_{name}"] = _row(f"U-Net f{features} train step ({name})", best / steps,
+                                    2.0 * 3 * macs * batch, peak, compile_and_first_call_s=first)
+    infer = jax.jit(lambda p, x: jax.lax.map(lambda xb: unet.robot_probability(p, xb), x))
+    _, best = _best(infer, state, images)
+    out["inference"] = _row(f"U-Net f{features} inference", best / steps, 2.0 * macs * batch,
+                            peak)
+    out["speedup_dot_wgrad_over_lax"] = out["train_lax"]["ms"] / out["train_dot_wgrad"]["ms"]
+    return out
+
+
+def bench_sac(hidden, batch: int, steps: int, peak: float, obs=6, goal=6, act=2) -> dict:
+    cfg = SACConfig(hidden=tuple(hidden), batch_size=batch)
+    key = jax.random.PRNGKey(0)
+    state = sac.init_sac(key, obs, goal, act, cfg)
+    ks = jax.random.split(key, 6)
+    batch_ = sac.Transition(obs=jax.random.normal(ks[0], (batch, obs)),
+                            goal=jax.random.normal(ks[1], (batch, goal)),
+                            action=jax.random.uniform(ks[2], (batch, act), minval=-1, maxval=1),
+                            reward=-jax.random.uniform(ks[3], (batch,)),
+                            next_obs=jax.random.normal(ks[4], (batch, obs)),
+                            done=jnp.zeros((batch,)))
+
+    @jax.jit
+    def run(state, key):
+        def body(st, k):
+            return sac.sac_update(st, k, batch_, cfg)[0], None
+        return jax.lax.scan(body, state, jax.random.split(key, steps))[0]
+
+    first, best = _best(run, state, key)
+    return _row(f"SAC {hidden} batch {batch} standalone", best / steps,
+                sac_update_flops(obs, goal, act, hidden, batch), peak, hidden=list(hidden),
+                batch=batch, compile_and_first_call_s=first)
+
+
+def bench_sac_in_chunk() -> dict:
+    """Per-update SAC cost inside the cpu-preset ROLL chunk: learn on minus learn off."""
+    spec = importlib.util.spec_from_file_location("bench_train", os.path.join(ROOT, "bench",
+                                                                              "train.py"))
+    bt = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bt)
+    return bt.sac_share_in_chunk(TASK, "cpu")
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--chunk", action="store_true",
+                   help="also time SAC inside the cpu-preset chunk (compiles the chunk: minutes)")
+    p.add_argument("--quick", action="store_true", help="fewer steps per call")
+    p.add_argument("--out", default=RESULTS)
+    a = p.parse_args(argv)
+    steps = 5 if a.quick else 20
+    res = {"jax_backend": jax.default_backend(), "jax_version": jax.__version__,
+           "cpu": platform.processor() or platform.machine(), "cpu_count": os.cpu_count(),
+           "load_average_at_start": list(os.getloadavg()), "task_configs": TASK,
+           "note": __doc__.split("\n\n")[0]}
+    print("matmul reference", flush=True)
+    res["matmul"] = bench_matmul()
+    peak = res["matmul"]["gflop_per_s"]
+    print("encoders (paper architectures and batch sizes)", flush=True)
+    res["scene_vae"] = bench_vae(scene_vae_config(TASK), steps, peak, "scene-VAE b64")
+    res["object_vae"] = bench_vae(object_vae_config(TASK), steps, peak, "object-VAE b128+match")
+    res["unet"] = [bench_unet(f, 32, max(steps // 4, 3), peak) for f in (8, 16)]
+    print("SAC", flush=True)
+    res["sac"] = [bench_sac((128, 128), 256, steps * 5, peak),
+                  bench_sac((400, 300), 1024, steps, peak)]
+    if a.chunk:
+        print("SAC inside the cpu-preset chunk", flush=True)
+        res["sac_in_chunk"] = bench_sac_in_chunk()
+        res["sac_in_chunk"]["over_standalone"] = (res["sac_in_chunk"]["sac_ms_per_update"]
+                                                  / res["sac"][0]["ms"])
+        print(f"  in-chunk / standalone per update: "
+              f"{res['sac_in_chunk']['over_standalone']:.2f}", flush=True)
+    res["load_average_at_end"] = list(os.getloadavg())
+    os.makedirs(os.path.dirname(os.path.abspath(a.out)), exist_ok=True)
+    with open(a.out, "w") as f:
+        json.dump(res, f, indent=2)
+    print(f"wrote {a.out}")
+
+
+if __name__ == "__main__":
+    main()

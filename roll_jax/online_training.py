@@ -1,0 +1,89 @@
+"""Online encoder training inside the chunk (Algorithm 1, appendix "Training schedules"):
+the scene-VAE on Skew-Fit-skewed replay images, the LSTM on replay trajectories
+(auto-encoder + matching loss), and the recomputation of the buffer's cached latents after
+either. `state` is the chunk's `loop.TrainState`."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from configs.train import TrainConfig
+from roll_jax import encoders, replay, skewfit
+from roll_jax.goal_encoding import Frozen, GoalEncoder
+
+
+def train_scene_vae(cfg: TrainConfig, state, key, n_batches):
+    """`n_batches` scene-VAE steps on replay images drawn with Skew-Fit weights (from the
+    stored log p(x) under the current VAE), then log p(x) of the whole buffer under the
+    trained VAE (rlkit recomputes its priorities after training too)."""
+    buf = state.buffer
+    k_lp, k_train = jax.random.split(key)
+    cdf = skewfit.skew_cdf(state.skew_log_p, cfg.skew_alpha, buf.size)
+
+    def body(i, carry):
+        vs, loss = carry
+        k_s, k_step = jax.random.split(jax.random.fold_in(k_train, i))
+        imgs = skewfit.sample_images(buf, k_s, cfg.vae_online_batch, cdf)
+        vs, m = encoders.vae_train_step(vs, k_step, imgs, cfg.scene)
+        return vs, loss + m["loss"]
+
+    vs, loss_sum = jax.lax.fori_loop(0, n_batches, body, (state.scene_vae, jnp.float32(0)))
+    log_p = skewfit.frame_log_p(cfg, vs.params, buf.images, k_lp)
+    return (state.replace(scene_vae=vs, skew_log_p=log_p),
+            {"vae_loss": loss_sum / jnp.maximum(n_batches, 1)})
+
+
+def online_occlusion(cfg: TrainConfig, enc: GoalEncoder, frozen: Frozen, scene_params, key,
+                     goal_images):
+    """The occluded frame per trajectory of goal images [B, T, H, W, 3] that an online LSTM
+    step's matching loss compares (encoders.Occlusion, encoded now by the frame encoder);
+    None when the matching loss is ablated. The clean frames' latents come from the buffer's
+    cache (`frame_latents`)."""
+    if not cfg.matching_loss:
+        return None
+    if enc.object_cfg is not None:
+        params, frame_cfg = frozen.object_vae, enc.object_cfg
+    else:
+        params, frame_cfg = scene_params, enc.scene_cfg
+    return encoders.make_occlusion(key, params, frame_cfg, goal_images, cfg.lstm)
+
+
+def train_lstm(cfg: TrainConfig, enc: GoalEncoder, frozen: Frozen, state, key,
+               n_batches):
+    """`n_batches` online LSTM steps on trajectories drawn uniformly from the buffer: the
+    auto-encoder loss, plus the matching loss unless ablated."""
+
+    def body(i, carry):
+        s, loss = carry
+        k_s, k_occ, k_step = jax.random.split(jax.random.fold_in(key, i), 3)
+        tr = replay.sample_trajectories(s.buffer, k_s, cfg.lstm.online_batch_size)
+        occ = online_occlusion(cfg, enc, frozen, s.scene_vae.params, k_occ, tr.object_images)
+        ls, m = encoders.lstm_train_step(s.lstm, k_step, tr.frame_latents, cfg.lstm, occ)
+        return s.replace(lstm=ls), loss + m["loss"]
+
+    state, loss_sum = jax.lax.fori_loop(0, n_batches, body, (state, jnp.float32(0)))
+    return state, {"lstm_loss": loss_sum / jnp.maximum(n_batches, 1)}
+
+
+REFRESH_CHUNK = 64  # episodes encoded at a time when the buffer's latents are recomputed
+
+
+def refresh_scene(cfg: TrainConfig, enc: GoalEncoder, state):
+    """After scene-VAE training: the buffer's scene latents, and its frame latents where the
+    scene-VAE encodes the goal frames (the same images: no-object-VAE, Skew-Fit)."""
+    params = state.scene_vae.params
+    buf = replay.recompute(state.buffer, "obs_latents", lambda x: encoders.encode_mean(params, cfg.scene, x),
+                           state.buffer.images, REFRESH_CHUNK)
+    if enc.object_cfg is None:
+        buf = buf.replace(frame_latents=buf.obs_latents)
+    return state.replace(buffer=buf)
+
+
+def refresh_goals(enc: GoalEncoder, state):
+    """The buffer's goal latents from its cached frame latents (the LSTM over each episode;
+    no image is encoded: the frame latents change only with `refresh_scene`)."""
+    lstm_params = None if state.lstm is None else state.lstm.params
+    buf = replay.recompute(state.buffer, "goal_latents", lambda e: enc.sequence(lstm_params, e),
+                           state.buffer.frame_latents, REFRESH_CHUNK)
+    return state.replace(buffer=buf)

@@ -1,0 +1,51 @@
+"""Figures of training runs: the median over seeds with its 25-75% band (the paper's Fig. 4
+style), shared by a run's learning curve and the reproduction grid's figures."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def seed_quantiles(rows: list[dict], key: str = "final_distance"):
+    """Per env step over seeds: (steps, median, 25th, 75th percentile) as numpy arrays."""
+    steps = sorted({r["env_steps"] for r in rows})
+    vals = [[r[key] for r in rows if r["env_steps"] == s] for s in steps]
+    return (np.asarray(steps), np.asarray([np.median(v) for v in vals]),
+            np.asarray([np.percentile(v, 25) for v in vals]),
+            np.asarray([np.percentile(v, 75) for v in vals]))
+
+
+def plot_median_band(ax, rows: list[dict], label: str, key: str = "final_distance", **kw) -> None:
+    """Median over seeds with the 25-75% band (the paper's Fig. 4 style) on `ax`."""
+    steps, med, lo, hi = seed_quantiles(rows, key)
+    if len(steps) <= 20:  # few evaluations: mark them; a single one shows its band as a bar
+        kw = {"marker": "o", "markersize": 3, **kw}
+    (line,) = ax.plot(steps, med, label=label, **kw)
+    ax.fill_between(steps, lo, hi, alpha=0.25, color=line.get_color())
+    if len(steps) == 1:
+        ax.errorbar(steps, med, yerr=[med - lo, hi - med], color=line.get_color(), capsize=3)
+    ax.set_xlabel("env steps")
+    ax.set_ylabel(key.replace("_", " "))
+
+
+def pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def learning_curve(rows: list[dict], path: str, title: str) -> None:
+    """The run's plot: median over seeds with the 25-75% band (the paper's Fig. 4 style)."""
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(4.5, 3.2))
+    plot_median_band(ax, rows, "median over seeds (band 25-75%)")
+    ax.set_title(title)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
