@@ -36,7 +36,7 @@ def segmented_data(env, seg, seed: int, n: int):
     @jax.jit
     def batch(keys):
         def one(k):
-            st = pipeline.random_placement(env, *jax.random.split(k))
+            st = env.random_placement(*jax.random.split(k))
             return env.render(st), env.object_state(st)
 
         rgb, pos = jax.vmap(one)(keys)

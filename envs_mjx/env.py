@@ -269,6 +269,26 @@ class Env:
             return jnp.abs(diff[0])
         return jnp.linalg.norm(diff)
 
+    @property
+    def kind(self) -> str:
+        """"push" (puck, hurdles), "door" or "pickup": what the object state means."""
+        return self.spec.kind
+
+    @property
+    def hand_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(low, high) of the hand's box (3,): where `step` keeps the mocap target."""
+        return np.asarray(self.spec.hand_low, np.float32), np.asarray(self.spec.hand_high, np.float32)
+
+    def random_hand(self, key):
+        """A hand position uniform in the task's hand box (3,)."""
+        return _uniform(key, self.spec.hand_low, self.spec.hand_high)
+
+    def random_placement(self, k_hand, k_object) -> EnvState:
+        """A state at rest (`place`) with the hand uniform in its box and the object uniform in
+        its goal space: datasets and analyses that need every configuration, not goals."""
+        return self.place(self.random_hand(k_hand),
+                          _uniform(k_object, self.spec.object_goal_low, self.spec.object_goal_high))
+
     def sample_goal(self, key) -> EnvState:
         """A state placed at a goal configuration drawn from the task's goal space."""
         k_obj, k_hand, k_air = jax.random.split(key, 3)

@@ -46,6 +46,27 @@ MIDDLE_WALL = {
     "hurdle_top": ((0.05, 0.55), (0.01, 0.07)),
 }
 
+
+def hurdle_path(task: str) -> tuple[tuple[float, float], ...]:
+    """Puck-centre waypoints (world xy) of the way around a hurdle task's middle wall: up (or
+    down) the corridor left of it, across the gap beyond its end, back along the corridor on
+    its right; each corridor and the gap at its centre line, the ends at the wall's centre
+    height kept a puck radius inside the free region. The path the arm pushes the puck along
+    (and occludes it on) in the occlusion analysis."""
+    if task not in MIDDLE_WALL:
+        raise ValueError(f"{task!r} has no hurdle; expected one of {sorted(MIDDLE_WALL)}")
+    (wx, wy), (whx, why) = MIDDLE_WALL[task]
+    x_lo = OUTER_WALLS[0][0][0] + OUTER_WALLS[0][1][0]  # inner faces of the outer walls
+    x_hi = OUTER_WALLS[3][0][0] - OUTER_WALLS[3][1][0]
+    y_lo = OUTER_WALLS[2][0][1] + OUTER_WALLS[2][1][1]
+    y_hi = OUTER_WALLS[1][0][1] - OUTER_WALLS[1][1][1]
+    left, right = (x_lo + wx - whx) / 2, (wx + whx + x_hi) / 2
+    open_top = (wy - why) - y_lo < y_hi - (wy + why)  # the gap is beyond the wall's top end
+    gap = (wy + why + y_hi) / 2 if open_top else (y_lo + wy - why) / 2
+    end = min(max(wy, y_lo + PUCK_RADIUS), y_hi - PUCK_RADIUS)
+    return ((left, end), (left, gap), (right, gap), (right, end))
+
+
 # Door: vertical hinge at (DOOR_HINGE_X, DOOR_Y); the handle bar is DOOR_HANDLE_R from the
 # hinge along -x and opens towards the robot (-y) for positive angles.
 DOOR_HINGE_X = 0.14

@@ -111,7 +111,7 @@ def batched(fn: Callable, x, chunk: int = 512):
 
 def _units(env) -> tuple[str, float]:
     """Axis label and scale for the task's object distance."""
-    if env.spec.kind == "door":
+    if env.kind == "door":
         return "door angle distance (rad)", 1.0
     return "object distance (cm)", 100.0
 
@@ -125,8 +125,7 @@ def observation_set(env, key, n: int):
     Returns (obs_rgb uint8 [n, 48, 48, 3], goal_rgb uint8 [48, 48, 3], distances [n],
     object states [n, k]) where distances = env.goal_distance(obs, goal) (metres, radians for
     the door) and the object states are `env.object_state`."""
-    from roll_jax.segmentation.pipeline import random_placement
-
+    
     k_goal, k_obs = jax.random.split(key)
 
     @jax.jit
@@ -134,7 +133,7 @@ def observation_set(env, key, n: int):
         goal = env.sample_goal(k_goal)
 
         def one(k):
-            st = random_placement(env, *jax.random.split(k))
+            st = env.random_placement(*jax.random.split(k))
             return env.render(st), env.goal_distance(st, goal), env.object_state(st)
 
         rgb, dist, pos = jax.vmap(one)(keys)
@@ -284,31 +283,22 @@ def model_encoders(cfg, pre, seg, chunk: int = 512) -> tuple[Callable, Callable]
 
 # ============================================================================ 2. occlusion
 
-# Puck-centre waypoints of the path around each hurdle (metres, world xy), from the walls in
-# envs_mjx/scenes.py and the puck radius 0.04: hurdle_top's middle wall spans x in
-# [0.04, 0.06], y in [0.48, 0.62]; the free region is x in [-0.07, 0.15], y in [0.49, 0.71].
-# The puck goes up the left corridor (x ~ -0.015), over the wall (y ~ 0.665) and down the
-# right corridor (x ~ 0.105) to the goal box: the path of the task, on which the arm pushes
-# from bottom to top and occludes the puck.
-HURDLE_PATHS = {
-    "hurdle_top": ((-0.015, 0.55), (-0.015, 0.665), (0.105, 0.665), (0.105, 0.56)),
-    "hurdle_bottom": ((-0.02, 0.66), (-0.02, 0.545), (0.10, 0.545), (0.10, 0.65)),
-}
+HURDLE_TASKS = ("hurdle_bottom", "hurdle_top")  # with a path around a wall (scenes.hurdle_path)
 HAND_BEHIND = 0.057  # puck radius 0.04 + claw radius 0.015 + 2 mm: the hand touching the puck
 
 
 def puck_paths(key, task: str, n: int, horizon: int, speed=(0.003, 0.008), jitter: float = 0.005):
-    """Kinematic pushes along the task's hurdle path: per trajectory a random start on the
-    path, a random speed (m/step, +-30% per-step noise) and a constant random offset of up to
-    `jitter` per axis; the puck stops at the end of the path. The hand stays just behind the
+    """Kinematic pushes along the task's hurdle path (`envs_mjx.scenes.hurdle_path`): per
+    trajectory a random start on the path, a random speed (m/step, +-30% per-step noise)
+    and a constant random offset of up to `jitter` per axis; the puck stops at the end of
+    the path. The hand stays just behind the
     puck (against the direction of motion), as when pushing it.
 
     Returns numpy (puck xy [n, T, 2], hand xy [n, T, 2])."""
-    if task not in HURDLE_PATHS:
-        raise ValueError(f"occlusion trajectories are defined for {sorted(HURDLE_PATHS)}, "
-                         f"not {task!r}")
+    from envs_mjx.scenes import hurdle_path
+
+    way = np.asarray(hurdle_path(task), np.float64)  # ValueError for a task without a hurdle
     rng = np.random.default_rng(int(jax.random.randint(key, (), 0, 2**31 - 1)))
-    way = np.asarray(HURDLE_PATHS[task], np.float64)
     seg = np.diff(way, axis=0)
     seg_len = np.linalg.norm(seg, axis=1)
     cum = np.r_[0.0, np.cumsum(seg_len)]
@@ -328,7 +318,7 @@ def puck_paths(key, task: str, n: int, horizon: int, speed=(0.003, 0.008), jitte
 
 def render_pushes(env, puck, hand, chunk: int = 256) -> np.ndarray:
     """uint8 [n, T, 48, 48, 3]: each (puck xy, hand xy) placed with `env.place` and rendered."""
-    lo, hi = np.asarray(env.spec.hand_low), np.asarray(env.spec.hand_high)
+    lo, hi = env.hand_bounds
     shape = puck.shape[:-1]
     hand3 = np.concatenate([hand.reshape(-1, 2), np.full((hand[..., 0].size, 1), lo[2])], -1)
     hand3 = np.clip(hand3, lo, hi).astype(np.float32)
@@ -654,7 +644,7 @@ def main(argv=None):
     a1.add_argument("--task", required=True, choices=TASKS)
     a1.add_argument("--n", type=int, default=500, help="observations (default 500)")
     a2 = sub.add_parser("occlusion", help="appendix A occlusion retrieval")
-    a2.add_argument("--task", default="hurdle_top", choices=sorted(HURDLE_PATHS))
+    a2.add_argument("--task", default="hurdle_top", choices=HURDLE_TASKS)
     a2.add_argument("--n-train", type=int, default=None,
                     help="training trajectories (default: the preset's, configs/presets.py)")
     a2.add_argument("--n-eval", type=int, default=None,

@@ -4,7 +4,7 @@
 
 For each training run (its latest checkpoint, seed 0's encoders: the scene-VAE as online
 training left it), `n` pairs of random placements (hand uniform in its box, object uniform in
-its goal space, independently: `pipeline.random_placement`), both rendered; the reward
+its goal space, independently: `env.random_placement`), both rendered; the reward
 encoder (the GoalEncoder of the run's config: segment -> object-VAE -> one LSTM step for
 ROLL, the scene-VAE of the whole image for Skew-Fit) encodes both, and the latent distance
 is ranked against the object distance (`env.goal_distance`) and the hand distance of the
@@ -25,7 +25,6 @@ import numpy as np
 
 from roll_jax.analysis import batched, spearman
 from roll_jax.goal_encoding import goal_encoder
-from roll_jax.segmentation.pipeline import random_placement
 
 
 def placement_pairs(env, key, n: int):
@@ -36,7 +35,7 @@ def placement_pairs(env, key, n: int):
     def run(keys):
         def one(k):
             ka, kb, kc, kd = jax.random.split(k, 4)
-            a, b = random_placement(env, ka, kb), random_placement(env, kc, kd)
+            a, b = env.random_placement(ka, kb), env.random_placement(kc, kd)
             return (env.render(a), env.render(b), env.goal_distance(a, b),
                     jnp.linalg.norm(env.hand_pos(a) - env.hand_pos(b)))
 

@@ -233,3 +233,32 @@ def test_import_hides_only_the_missing_warp_lines(tmp_path):
     out, _ = _import_in_subprocess("import envs_mjx", pythonpath=str(tmp_path))
     assert "fake warp loading" in out
     assert "Failed to import warp: fake warp is broken" in out.splitlines()
+
+
+# ----------------------------------------------------------------- placements and hurdle paths
+
+def test_random_placement_puts_hand_in_its_box_and_object_in_the_goal_space():
+    env = env_of("puck_push")
+    lo, hi = env.hand_bounds
+    states = jax.jit(jax.vmap(env.random_placement))(*jax.random.split(jax.random.PRNGKey(0),
+                                                                      (2, 64)))
+    hand = np.asarray(jax.vmap(env.hand_pos)(states))
+    puck = np.asarray(jax.vmap(env.object_state)(states))
+    assert np.all(hand >= lo - 2e-3) and np.all(hand <= hi + 2e-3)
+    assert np.all(puck >= np.asarray(env.spec.object_goal_low) - 1e-4)
+    assert np.all(puck <= np.asarray(env.spec.object_goal_high) + 1e-4)
+    assert puck.std(0).min() > 0.01  # spread over the goal space, not one point
+
+
+@pytest.mark.parametrize("task", sorted(scenes.MIDDLE_WALL))
+def test_hurdle_path_keeps_the_puck_clear_of_every_wall(task):
+    path = np.asarray(scenes.hurdle_path(task))
+    # points every 5 mm along the path: the puck there touches no wall
+    pts = np.concatenate([a + np.linspace(0, 1, 50)[:, None] * (b - a)
+                          for a, b in zip(path[:-1], path[1:])])
+    for (cx, cy), (hx, hy) in list(scenes.OUTER_WALLS) + [scenes.MIDDLE_WALL[task]]:
+        gap = np.hypot(np.maximum(np.abs(pts[:, 0] - cx) - hx, 0),
+                       np.maximum(np.abs(pts[:, 1] - cy) - hy, 0))
+        assert gap.min() >= scenes.PUCK_RADIUS - 1e-9, ((cx, cy), gap.min())
+    with pytest.raises(ValueError, match="no hurdle"):
+        scenes.hurdle_path("puck_push")

@@ -43,19 +43,6 @@ class SegParams:
 
 # ----------------------------------------------------------------------------- data
 
-def _uniform(key, low, high):
-    low, high = jnp.asarray(low, jnp.float32), jnp.asarray(high, jnp.float32)
-    return low + (high - low) * jax.random.uniform(key, low.shape)
-
-
-def random_placement(env, k_hand, k_object):
-    """A state at rest (kinematic `env.place`) with the hand uniform in its box and the object
-    uniform in its goal space."""
-    s = env.spec
-    return env.place(_uniform(k_hand, s.hand_low, s.hand_high),
-                     _uniform(k_object, s.object_goal_low, s.object_goal_high))
-
-
 def record_empty_scene(env, key, n_frames: int, n_envs: int, width: int = 48,
                        height: int = 48) -> jax.Array:
     """uint8[n_frames, H, W, 3] of the robot moving at random in the object-free scene.
@@ -68,11 +55,10 @@ def record_empty_scene(env, key, n_frames: int, n_envs: int, width: int = 48,
 
     empty = env.empty_scene()
     steps = -(-n_frames // n_envs)
-    lo, hi = env.spec.hand_low, env.spec.hand_high
 
     def one(k):
         k_hand, k_act = jax.random.split(k)
-        state = empty.place(_uniform(k_hand, lo, hi))
+        state = empty.place(empty.random_hand(k_hand))
         _, traj = rollout(empty, state, random_actions(k_act, steps, empty.action_size),
                           render=True, width=width, height=height)
         return traj.rgb
@@ -200,7 +186,7 @@ def random_object_states(env, key, n: int, settle_steps: int = 5, chunk: int = 3
 
     def one(k):
         k_h, k_o, k_a = jax.random.split(k, 3)
-        state = random_placement(env, k_h, k_o)
+        state = env.random_placement(k_h, k_o)
         if settle_steps:  # (0: kinematics only, no MJX step in the compiled program)
             state, _ = rollout(env, state, random_actions(k_a, settle_steps, env.action_size))
         return env.render_both(state)
