@@ -69,11 +69,13 @@ def conv_transpose_valid(x: jnp.ndarray, kernel: jnp.ndarray, stride: int) -> jn
 
 
 class Conv(nn.Module):
-    """``nn.Conv(features, (k, k), strides=(s, s), padding="VALID")`` as patches + matmul."""
+    """``nn.Conv(features, (k, k), strides=(s, s), padding="VALID")`` as patches + matmul;
+    ``transpose``: ``nn.ConvTranspose`` with the same arguments."""
 
     features: int
     kernel_size: int
     stride: int = 1
+    transpose: bool = False
 
     @nn.compact
     def __call__(self, x):
@@ -81,20 +83,10 @@ class Conv(nn.Module):
         kernel = self.param("kernel", nn.initializers.lecun_normal(),
                             (k, k, x.shape[-1], self.features))
         bias = self.param("bias", nn.initializers.zeros_init(), (self.features,))
-        return conv_valid(x, kernel, self.stride) + bias
+        op = conv_transpose_valid if self.transpose else conv_valid
+        return op(x, kernel, self.stride) + bias
 
 
-class ConvTranspose(nn.Module):
-    """``nn.ConvTranspose(features, (k, k), strides=(s, s), padding="VALID")`` as one matmul."""
-
-    features: int
-    kernel_size: int
-    stride: int = 1
-
-    @nn.compact
-    def __call__(self, x):
-        k = self.kernel_size
-        kernel = self.param("kernel", nn.initializers.lecun_normal(),
-                            (k, k, x.shape[-1], self.features))
-        bias = self.param("bias", nn.initializers.zeros_init(), (self.features,))
-        return conv_transpose_valid(x, kernel, self.stride) + bias
+def ConvTranspose(features: int, kernel_size: int, stride: int = 1) -> Conv:  # noqa: N802
+    """``nn.ConvTranspose(features, (k, k), strides=(s, s), padding="VALID")``."""
+    return Conv(features, kernel_size, stride, transpose=True)
