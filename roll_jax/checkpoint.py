@@ -28,12 +28,16 @@ def read_meta(path: str, what: str) -> tuple[str, dict]:
 # --- the training state (a run's ckpt/) ---------------------------------------------------------
 
 def train_state_manager(out: str, keep: int, create: bool = True):
-    """orbax CheckpointManager of a run's train states in `out`/ckpt (keeps the last `keep`)."""
+    """orbax CheckpointManager of a run's train states in `out`/ckpt (keeps the last `keep`);
+    `create=False`: read only."""
     import orbax.checkpoint as ocp
 
-    return ocp.CheckpointManager(
-        os.path.abspath(os.path.join(out, "ckpt")),
-        options=ocp.CheckpointManagerOptions(max_to_keep=keep, create=create, read_only=not create))
+    if create:
+        options = ocp.CheckpointManagerOptions(max_to_keep=keep, create=True)
+    else:  # read only (evaluation): nothing saved, nothing pruned
+        options = ocp.CheckpointManagerOptions(read_only=True, create=False, max_to_keep=None,
+                                               save_interval_steps=0)
+    return ocp.CheckpointManager(os.path.abspath(os.path.join(out, "ckpt")), options=options)
 
 
 def _saveable(state) -> dict:
