@@ -117,6 +117,12 @@ def parse_args(argv=None):
         sharding.resolve_seed_batch(a.seed_batch, cfg.seeds, len(devs))
     except ValueError as e:
         p.error(str(e))
+    from roll_jax.train import check_given
+
+    try:
+        check_given(seg_ckpt=a.seg_ckpt, enc_ckpt=a.enc_ckpt)
+    except FileNotFoundError as e:
+        p.error(str(e))
     if a.resume:
         from roll_jax.train import check_resume
 

@@ -76,6 +76,7 @@ def main(argv=None) -> dict:
 
     compile_cache.use(compile_cache.default_dir())
     cfg = train.build_config(a.task, a.algo, a.preset, seeds=a.seeds, overrides=a.set)
+    train.check_given(seg_ckpt=a.seg_ckpt, enc_ckpt=a.enc_ckpt)
     resume = os.path.exists(os.path.join(out_dir, "config.json"))
     load0 = os.getloadavg()
     t0 = time.perf_counter()

@@ -54,8 +54,15 @@ def _unsaveable(abstract, saved: dict):
     import numpy as np
 
     leaves, treedef = jax.tree.flatten(abstract)
-    out = [saved[str(i)] if x.size else np.zeros(x.shape, x.dtype) for i, x in enumerate(leaves)]
-    return jax.tree.unflatten(treedef, [jnp.asarray(x) for x in out])
+    out = []
+    for i, x in enumerate(leaves):
+        leaf = saved[str(i)] if x.size else np.zeros(x.shape, x.dtype)
+        # Placed like the abstract leaf (when it says where): an uncommitted leaf beside
+        # committed ones gives the chunk another signature, so a resumed run would compile
+        # its chunk again instead of hitting the compilation cache.
+        sharding = getattr(x, "sharding", None)
+        out.append(jnp.asarray(leaf) if sharding is None else jax.device_put(leaf, sharding))
+    return jax.tree.unflatten(treedef, out)
 
 
 def save_train_state(mgr, epoch: int, state) -> None:

@@ -122,6 +122,15 @@ def check_resume(out: str, cfg: TrainConfig) -> None:
                          f"saved {saved.get(k)!r}, now {now.get(k)!r}")
 
 
+def check_given(**paths) -> None:
+    """FileNotFoundError naming the first given checkpoint directory without a meta.json
+    (keywords: the option names, e.g. seg_ckpt=..., enc_ckpt=...; None = not given)."""
+    for name, path in paths.items():
+        if path is not None and not os.path.exists(os.path.join(path, "meta.json")):
+            raise FileNotFoundError(f"{name}={path!r} is not a checkpoint directory (no "
+                                    f"meta.json in it)")
+
+
 def setup(cfg: TrainConfig, env, key, out: str, seg_ckpt=None, enc_ckpt=None, progress=True,
           times: PhaseTimes | None = None, pretrain_cache: str | None = None):
     """Segmentation and encoders (fitted, or loaded from the given/previous checkpoints;
@@ -130,12 +139,10 @@ def setup(cfg: TrainConfig, env, key, out: str, seg_ckpt=None, enc_ckpt=None, pr
     times = PhaseTimes() if times is None else times
     enc = goal_encoder(cfg)
     k_seg, k_pre = jax.random.split(key)
-    # A checkpoint the caller names must exist: fitting a fresh one in its place would hide
-    # a wrong path behind minutes of pretraining.
-    for name, path in (("seg_ckpt", seg_ckpt), ("enc_ckpt", enc_ckpt)):
-        if path is not None and not os.path.exists(os.path.join(path, "meta.json")):
-            raise FileNotFoundError(f"{name}={path!r} is not a checkpoint directory (no "
-                                    f"meta.json in it)")
+    # Named encoders must exist: pretraining fresh ones in their place would hide a wrong path
+    # behind minutes of work. (A segmentation directory is fitted into when empty: the grid
+    # shares one per task that way; the CLIs check a user's --seg-ckpt: `check_given`.)
+    check_given(enc_ckpt=enc_ckpt)
     seg = None
     with times("segmentation"):
         if enc.segment:
