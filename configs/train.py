@@ -209,6 +209,8 @@ def make_config(task: str, algo: str = "roll", preset: str = "paper", **override
         sac=SACConfig(**pre["sac"]),
     )
     values.update(pre["train"])
+    if algo == "roll":
+        values.update(pre["train_roll"])
     values.update(overrides)
     if not values.get("use_object_vae", True) and "lstm" not in overrides:
         # --no-object-vae: the LSTM runs on (and reconstructs) scene-VAE latents.

@@ -68,3 +68,10 @@ def test_every_cli_takes_preset_cpu_and_lists_the_presets(train_cli, tmp_path, c
             main(argv + ["--preset", "gpu"])
         err = capsys.readouterr().err
         assert "gpu" in err and all(name in err for name in presets.PRESETS), (main, err)
+
+
+def test_cpu_preset_trains_only_skewfits_scene_vae_online():
+    assert make_config("puck_push", "roll", "cpu").vae_schedule == "none"
+    assert make_config("puck_push", "skewfit", "cpu").vae_schedule == "custom_schedule_2"
+    assert make_config("door_open", "skewfit", "cpu").vae_schedule == "custom_schedule"
+    assert make_config("puck_push", "roll", "cpu", vae_schedule="smoke").vae_schedule == "smoke"
