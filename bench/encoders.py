@@ -29,6 +29,8 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
+from bench.common import time_best, write_results  # noqa: E402
+
 import jax
 import jax.numpy as jnp
 
@@ -41,23 +43,8 @@ RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "e
 TASK = "hurdle_top"
 
 
-def _timeit(fn, *args, repeats: int = 3, min_time: float = 1.0):
-    """(compile+first call seconds, best seconds per call) of a jitted fn."""
-    t0 = time.perf_counter()
-    jax.block_until_ready(fn(*args))
-    first = time.perf_counter() - t0
-    best = float("inf")
-    total, n = 0.0, 0
-    while n < repeats or (total < min_time and n < 20):
-        t0 = time.perf_counter()
-        jax.block_until_ready(fn(*args))
-        dt = time.perf_counter() - t0
-        best, total, n = min(best, dt), total + dt, n + 1
-    return first, best
-
-
 def _timeit_donated(run, state, key):
-    """`_timeit` of a jitted `run(state, key) -> (state, out)` that donates its state: each
+    """`time_best` of a jitted `run(state, key) -> (state, out)` that donates its state: each
     call feeds the previous call's state back in (a donated buffer cannot be reused)."""
     holder = {"s": state}
 
@@ -65,7 +52,7 @@ def _timeit_donated(run, state, key):
         holder["s"], out = run(holder["s"], k)
         return out
 
-    return _timeit(call, key)
+    return time_best(call, key)
 
 
 def _images(key, shape, object_like: bool):
@@ -137,11 +124,11 @@ def bench_encode(scfg, vcfg, lcfg, batch: int, key) -> dict:
     seq = seg[:n_traj * t_len].reshape((n_traj, t_len) + vcfg.image_shape)
     seq_fn = jax.jit(lambda p, l, x: lstm_encode(l, encoders.encode_mean(p, vcfg, x)))
     out = {"batch": batch}
-    f, b = _timeit(scene_fn, scene.params, rgb)
+    f, b = time_best(scene_fn, scene.params, rgb)
     out["scene_vae_images_per_s"], out["scene_vae_compile_s"] = batch / b, f
-    f, b = _timeit(obj_fn, obj.params, lstm.params, seg)
+    f, b = time_best(obj_fn, obj.params, lstm.params, seg)
     out["object_vae_lstm_single_images_per_s"], out["object_vae_lstm_single_compile_s"] = batch / b, f
-    f, b = _timeit(seq_fn, obj.params, lstm.params, seq)
+    f, b = time_best(seq_fn, obj.params, lstm.params, seq)
     out["object_vae_lstm_sequence_images_per_s"] = n_traj * t_len / b
     out["object_vae_lstm_sequence_shape"] = [n_traj, t_len]
     return out
@@ -180,12 +167,8 @@ def main(argv=None):
     print("LSTM ae    ", json.dumps(res["lstm_train_ae_only"]), flush=True)
     res["encode"] = bench_encode(scfg, vcfg, lcfg, 1024, key)
     print("encode     ", json.dumps(res["encode"]), flush=True)
-    res["load_average_at_end"] = list(os.getloadavg())
     res["wall_s"] = time.perf_counter() - t0
-    os.makedirs(os.path.dirname(os.path.abspath(a.out)), exist_ok=True)
-    with open(a.out, "w") as f:
-        json.dump(res, f, indent=2)
-    print(f"wrote {a.out}")
+    write_results(a.out, res)
 
 
 if __name__ == "__main__":

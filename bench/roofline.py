@@ -48,6 +48,8 @@ import time
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
+from bench.common import time_best, write_results  # noqa: E402
+
 import jax
 import jax.numpy as jnp
 
@@ -60,20 +62,6 @@ from roll_jax.segmentation import unet
 
 RESULTS = os.path.join(ROOT, "bench", "results", "roofline.json")
 TASK = "puck_push"
-
-
-def _best(fn, *args, min_time: float = 1.0, repeats: int = 3) -> tuple[float, float]:
-    """(first call incl. compile s, best s per call) of a jitted fn."""
-    t0 = time.perf_counter()
-    jax.block_until_ready(fn(*args))
-    first = time.perf_counter() - t0
-    best, total, n = float("inf"), 0.0, 0
-    while n < repeats or (total < min_time and n < 20):
-        t0 = time.perf_counter()
-        jax.block_until_ready(fn(*args))
-        dt = time.perf_counter() - t0
-        best, total, n = min(best, dt), total + dt, n + 1
-    return first, best
 
 
 def _row(name: str, seconds: float, flops: float, peak: float, **extra) -> dict:
@@ -132,7 +120,7 @@ def sac_update_flops(obs: int, goal: int, act: int, hidden, batch: int) -> float
 def bench_matmul(n: int = 2048) -> dict:
     a = jax.random.normal(jax.random.PRNGKey(0), (n, n))
     b = jax.random.normal(jax.random.PRNGKey(1), (n, n))
-    _, best = _best(jax.jit(jnp.dot), a, b, repeats=5)
+    _, best = time_best(jax.jit(jnp.dot), a, b, repeats=5)
     rate = 2 * n ** 3 / best / 1e9
     print(f"  matmul {n}x{n} float32: {1e3 * best:.1f} ms, {rate:.1f} GFLOP/s", flush=True)
     return {"n": n, "ms": 1e3 * best, "gflop_per_s": rate}
@@ -166,7 +154,7 @@ def bench_vae(cfg, steps: int, peak: float, name: str) -> dict:
                 return encoders.vae_train_step(st, k, images, c, masks)[0], None
             return jax.lax.scan(body, state, jax.random.split(key, steps))[0]
 
-        first, best = _best(run, state, key)
+        first, best = time_best(run, state, key)
         out[impl] = _row(f"{name} train step ({impl})", best / steps, flops, peak,
                          batch=cfg.batch_size, compile_and_first_call_s=first)
     out["speedup_matmul_over_lax"] = out["lax"]["ms"] / out["matmul"]["ms"]
@@ -202,11 +190,11 @@ def bench_unet(features: int, batch: int, steps: int, peak: float) -> dict:
                 return st.replace(params=params, batch_stats=stats, opt_state=opt), None
             return jax.lax.scan(body, state, (images, labels))[0]
 
-        first, best = _best(run, state)
+        first, best = time_best(run, state)
         out[f"train_{name}"] = _row(f"U-Net f{features} train step ({name})", best / steps,
                                     2.0 * 3 * macs * batch, peak, compile_and_first_call_s=first)
     infer = jax.jit(lambda p, x: jax.lax.map(lambda xb: unet.robot_probability(p, xb), x))
-    _, best = _best(infer, state, images)
+    _, best = time_best(infer, state, images)
     out["inference"] = _row(f"U-Net f{features} inference", best / steps, 2.0 * macs * batch,
                             peak)
     out["speedup_dot_wgrad_over_lax"] = out["train_lax"]["ms"] / out["train_dot_wgrad"]["ms"]
@@ -231,7 +219,7 @@ def bench_sac(hidden, batch: int, steps: int, peak: float, obs=6, goal=6, act=2)
             return sac.sac_update(st, k, batch_, cfg)[0], None
         return jax.lax.scan(body, state, jax.random.split(key, steps))[0]
 
-    first, best = _best(run, state, key)
+    first, best = time_best(run, state, key)
     return _row(f"SAC {hidden} batch {batch} standalone", best / steps,
                 sac_update_flops(obs, goal, act, hidden, batch), peak, hidden=list(hidden),
                 batch=batch, compile_and_first_call_s=first)
@@ -276,11 +264,7 @@ def main(argv=None):
                                                   / res["sac"][0]["ms"])
         print(f"  in-chunk / standalone per update: "
               f"{res['sac_in_chunk']['over_standalone']:.2f}", flush=True)
-    res["load_average_at_end"] = list(os.getloadavg())
-    os.makedirs(os.path.dirname(os.path.abspath(a.out)), exist_ok=True)
-    with open(a.out, "w") as f:
-        json.dump(res, f, indent=2)
-    print(f"wrote {a.out}")
+    write_results(a.out, res)
 
 
 if __name__ == "__main__":

@@ -54,6 +54,8 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
+from bench.common import write_results  # noqa: E402
+
 import jax
 import jax.numpy as jnp
 
@@ -530,15 +532,11 @@ def main(argv=None):
     print(res["note"], flush=True)
     for s in a.seeds:
         res["runs"].append(bench_seeds(a, s, env))
-    res["load_average_at_end"] = list(os.getloadavg())
     res["wall_s"] = time.perf_counter() - t0
     print()
     print(table(res["runs"]))
-    print(f"\nwall {res['wall_s']:.0f} s; load average {res['load_average_at_end']}")
-    os.makedirs(os.path.dirname(os.path.abspath(a.out)), exist_ok=True)
-    with open(a.out, "w") as f:
-        json.dump(res, f, indent=2)
-    print(f"wrote {a.out}")
+    print(f"\nwall {res['wall_s']:.0f} s; load average {list(os.getloadavg())}")
+    write_results(a.out, res)
 
 
 if __name__ == "__main__":

@@ -1,0 +1,33 @@
+"""What the benchmarks share: timing a jitted function, writing a results JSON."""
+from __future__ import annotations
+
+import json
+import os
+import time
+
+
+def write_results(path: str, res: dict) -> None:
+    """Stamp the load average at the end (was the machine shared?), write `res` to `path`
+    (creating its folder) and say so."""
+    res["load_average_at_end"] = list(os.getloadavg())
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    with open(path, "w") as f:
+        json.dump(res, f, indent=2)
+    print(f"wrote {path}")
+
+
+def time_best(fn, *args, repeats: int = 3, min_time: float = 1.0) -> tuple[float, float]:
+    """(first call incl. compile s, best s per call) of a jitted fn: at least `repeats`
+    timed calls after the first, more (up to 20) until `min_time` seconds were timed."""
+    import jax
+
+    t0 = time.perf_counter()
+    jax.block_until_ready(fn(*args))
+    first = time.perf_counter() - t0
+    best, total, n = float("inf"), 0.0, 0
+    while n < repeats or (total < min_time and n < 20):
+        t0 = time.perf_counter()
+        jax.block_until_ready(fn(*args))
+        dt = time.perf_counter() - t0
+        best, total, n = min(best, dt), total + dt, n + 1
+    return first, best
