@@ -132,7 +132,8 @@ def _vae_images(key, batch: int, object_like: bool):
     c = jax.random.uniform(key, (batch, 2), minval=8, maxval=40)
     yy, xx = jnp.mgrid[0:48, 0:48]
     mask = (yy - c[:, 0, None, None]) ** 2 + (xx - c[:, 1, None, None]) ** 2 <= 25
-    return jnp.where(mask[..., None], jnp.uint8(200), jnp.uint8(0)), mask
+    img = jnp.where(mask[..., None], jnp.uint8(200), jnp.uint8(0))
+    return jnp.broadcast_to(img, mask.shape + (3,)), mask
 
 
 def bench_vae(cfg, steps: int, peak: float, name: str) -> dict:
