@@ -253,8 +253,7 @@ def _scene_encode(params, cfg, rgb):
 
 @functools.partial(jax.jit, static_argnames=("enc",))
 def _object_encode(enc: GoalEncoder, frozen, scene_params, lstm_params, rgb):
-    frames = enc.frame_latents(frozen, scene_params, enc.goal_images(frozen, rgb))
-    return enc.single(lstm_params, frames)
+    return enc.encode_goal_images(frozen, scene_params, lstm_params, rgb)
 
 
 @functools.partial(jax.jit, static_argnames=("enc",))

@@ -86,9 +86,10 @@ def load_run(run: str, seg_ckpt: str | None = None, enc_ckpt: str | None = None)
         pre = pretrain.initial(cfg, jax.random.PRNGKey(0))
     else:
         pre = pretrain.load(enc_ckpt or inputs["enc_ckpt"], cfg)
+    from roll_jax import train
+
     keys = jax.random.split(jax.random.PRNGKey(0), cfg.seeds)
-    abstract = jax.eval_shape(
-        jax.vmap(lambda k: loop.init_state(k, cfg, env, pre.scene_vae, pre.lstm)), keys)
+    abstract = jax.eval_shape(lambda k: train.init_states(cfg, env, k, pre), keys)
     epoch, state = restore_train_state(mgr, abstract)
     mgr.close()
     frozen = Frozen(seg=seg, object_vae=None if pre.object_vae is None else pre.object_vae.params)
@@ -120,8 +121,7 @@ def _goal_latents(enc: GoalEncoder, env, frozen, state, rgb, goal_states):
     if enc.oracle:
         return jax.vmap(lambda st: loop.oracle_goal(env, st))(goal_states)
     lstm_params = None if state.lstm is None else state.lstm.params
-    return enc.single(lstm_params, enc.frame_latents(frozen, state.scene_vae.params,
-                                                     enc.goal_images(frozen, rgb)))
+    return enc.encode_goal_images(frozen, state.scene_vae.params, lstm_params, rgb)
 
 
 @functools.lru_cache(maxsize=4)

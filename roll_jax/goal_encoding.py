@@ -84,6 +84,12 @@ class GoalEncoder:
         flat = frame_latents.reshape((-1, 1, frame_latents.shape[-1]))
         return lstm_encode(lstm_params, flat)[:, 0].reshape(frame_latents.shape[:-1] + (-1,))
 
+    def encode_goal_images(self, frozen: Frozen, scene_params, lstm_params, rgb):
+        """Goal latents [..., goal_dim] of goal images rgb [..., 48, 48, 3], as the paper
+        encodes a test goal: segment (ROLL) -> frame encoder -> one LSTM step."""
+        return self.single(lstm_params,
+                           self.frame_latents(frozen, scene_params, self.goal_images(frozen, rgb)))
+
     def prior_goals(self, key, lstm_params, n: int, stats=None):
         """n goals from the frame encoder's prior N(0, I) (or N(mean, std) with
         `stats` = (mean, std)), encoded like a goal frame."""

@@ -222,8 +222,7 @@ def test_goals(cfg: TrainConfig, env, enc: GoalEncoder, frozen: Frozen, scene_pa
         rgb = env.render(jax.tree.map(lambda x: x[0], states))[None]
         return states, rgb, jax.vmap(lambda st: oracle_goal(env, st))(states)
     rgb = jax.vmap(env.render)(states)
-    latents = enc.single(lstm_params, enc.frame_latents(frozen, scene_params,
-                                                        enc.goal_images(frozen, rgb)))
+    latents = enc.encode_goal_images(frozen, scene_params, lstm_params, rgb)
     return states, rgb, latents
 
 

@@ -53,13 +53,8 @@ def reward_latents(loaded, seed_index: int = 0):
     state = jax.tree.map(lambda x: x[seed_index], loaded.state)
     lstm_params = None if state.lstm is None else state.lstm.params
 
-    @jax.jit
-    def encode(rgb):
-        frames = enc.frame_latents(loaded.frozen, state.scene_vae.params,
-                                   enc.goal_images(loaded.frozen, rgb))
-        return enc.single(lstm_params, frames)
-
-    return encode
+    return jax.jit(lambda rgb: enc.encode_goal_images(loaded.frozen, state.scene_vae.params,
+                                                       lstm_params, rgb))
 
 
 def correlations(encode, pairs) -> dict:
