@@ -45,11 +45,15 @@ def summarize(rows: list[dict], target: float) -> dict:
     hit = [int(s) for s, m in zip(steps, med) if m <= target]
     auc = float(np.trapezoid(med, steps)) if len(steps) > 1 else 0.0
     span = float(steps[-1] - steps[0]) if len(steps) > 1 else 1.0
-    return {"env_steps": steps.tolist(), "median": med.tolist(), "q25": q25.tolist(),
-            "q75": q75.tolist(), "auc_m_steps": auc, "mean_distance_over_run": auc / span,
-            "initial_median": float(med[0]), "final_median": float(med[-1]),
-            "final_over_initial": float(med[-1] / med[0]),
-            "target": target, "first_env_steps_median_le_target": hit[0] if hit else None}
+    out = {"env_steps": steps.tolist(), "median": med.tolist(), "q25": q25.tolist(),
+           "q75": q75.tolist(), "auc_m_steps": auc, "mean_distance_over_run": auc / span,
+           "initial_median": float(med[0]), "final_median": float(med[-1]),
+           "final_over_initial": float(med[-1] / med[0]),
+           "target": target, "first_env_steps_median_le_target": hit[0] if hit else None}
+    if "start_distance" in rows[0]:  # the test goals' distance at their first step (fixed)
+        start = float(seed_quantiles(rows, "start_distance")[1][0])
+        out.update(start_median=start, final_over_start=float(med[-1] / start))
+    return out
 
 
 def main(argv=None) -> dict:
@@ -110,6 +114,9 @@ def main(argv=None) -> dict:
     for s, m, lo, hi in zip(c["env_steps"], c["median"], c["q25"], c["q75"]):
         print(f"env steps {s:7d}: median final distance {m * 100:5.2f} cm "
               f"(25-75%: {lo * 100:.2f}-{hi * 100:.2f})")
+    if "start_median" in c:
+        print(f"test goals' start distance {c['start_median'] * 100:.2f} cm; "
+              f"final/start {c['final_over_start']:.2f}")
     print(f"final/initial {c['final_over_initial']:.2f}; first <= {a.target * 100:.0f} cm at "
           f"{c['first_env_steps_median_le_target']}; wall {wall:.0f} s; wrote {path}")
     return out

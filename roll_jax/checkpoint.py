@@ -76,5 +76,12 @@ def restore_train_state(mgr, abstract):
     import orbax.checkpoint as ocp
 
     step = mgr.latest_step()
-    saved = mgr.restore(step, args=ocp.args.StandardRestore(_saveable(abstract)))
+    target = _saveable(abstract)
+    try:
+        saved = mgr.restore(step, args=ocp.args.StandardRestore(target))
+    except (ValueError, KeyError) as e:
+        raise ValueError(
+            f"the train state in {mgr.directory}/{step} does not fit this version's "
+            f"TrainState ({len(target)} arrays); it was written by another version of "
+            f"roll_jax (read it with that version): {str(e)[:160]}") from e
     return step, _unsaveable(abstract, saved)

@@ -62,6 +62,10 @@ class TrainState:
     key: jax.Array
     env_steps: jax.Array  # int32, per seed
     epoch: jax.Array  # int32
+    # The key of the test envs' starts and goals (`test_goals`): the same at every
+    # evaluation of a seed, so that a learning curve compares one policy against the next on
+    # the same goals (how far a goal lies from its start varies more than the policy does).
+    eval_key: jax.Array
 
 
 @struct.dataclass
@@ -123,7 +127,7 @@ def plan_chunk(cfg: TrainConfig, epoch: int) -> ChunkPlan:
 def init_state(key, cfg: TrainConfig, env, scene_vae: encoders.ModelState, lstm) -> TrainState:
     """A fresh seed: new SAC nets, given (pretrained) scene-VAE and LSTM, empty buffer."""
     enc = goal_encoder(cfg)
-    k_sac, k_env, k_run = jax.random.split(key, 3)
+    k_sac, k_env, k_run, k_eval = jax.random.split(key, 4)
     obs_dim, goal_dim, frame_dim = latent_dims(enc, env)
     sac_state = sac.init_sac(k_sac, obs_dim, goal_dim, env.action_size, cfg.sac)
     # The oracle stores no images (a 1x1 placeholder keeps one buffer layout).
@@ -137,7 +141,7 @@ def init_state(key, cfg: TrainConfig, env, scene_vae: encoders.ModelState, lstm)
                       test_start=jax.tree.map(lambda x: x[cfg.n_envs:], starts),
                       last_train={k: jnp.zeros((), jnp.float32) for k in train_metric_keys(cfg)},
                       key=k_run, env_steps=jnp.zeros((), jnp.int32),
-                      epoch=jnp.zeros((), jnp.int32))
+                      epoch=jnp.zeros((), jnp.int32), eval_key=k_eval)
 
 
 # ----------------------------------------------------------------------------- pieces
@@ -231,14 +235,18 @@ def _concat(a, b):
 
 
 def collect_episode(cfg: TrainConfig, env, enc: GoalEncoder, frozen: Frozen, state: TrainState,
-                    key, act_random, prior=None, learn=None, eval_policy=None):
+                    key, act_random, prior=None, learn=None, eval_policy=None,
+                    episode_index=0):
     """One episode of all E training envs and, in the same env batch, of G = n_eval_goals
     test envs -> (env_state, replay.Trajectory [E, ...], Skew-Fit log p(x) of its scene
     images [E, T+1] (zeros when unused, `needs_log_p`), metrics incl. the test envs' final
     distances [G], a video of test env 0 [T+1, H, W, 3] and its goal image).
 
-    The test envs start from fresh resets, chase test goals (`test_goals`) with the
-    deterministic policy and are neither stored nor learned from. Sharing the batch costs G
+    The test envs start from resets, chase test goals (`test_goals`) with the deterministic
+    policy and are neither stored nor learned from; starts and goals come from
+    state.eval_key and `episode_index` (the episode's place in its chunk), so every
+    evaluation of a seed sees the same ones (reset-free tasks carry their test envs' states
+    on, as their training envs do). Sharing the batch costs G
     more envs per step but no second compiled copy of MJX's step (the largest compile), and
     one reset serves both. Each frame is encoded once (the policy's observation is the
     stored scene latent). `prior`: what prior goals are drawn from (`goal_prior`).
@@ -247,7 +255,8 @@ def collect_episode(cfg: TrainConfig, env, enc: GoalEncoder, frozen: Frozen, sta
     updates after every env step (on the buffer as it was at the episode's start); the test
     envs then act with `eval_policy` (the policy the chunk started from) and the new SAC state
     and its mean metrics come back in the metrics ("sac_state", "sac")."""
-    k_reset, k_goal, k_act, k_lp, k_test = jax.random.split(key, 5)
+    k_reset, k_goal, k_act, k_lp = jax.random.split(key, 4)
+    k_test_reset, k_test = jax.random.split(jax.random.fold_in(state.eval_key, episode_index))
     interleave = cfg.sac_schedule == "step"
     eval_policy = state.sac.policy_params if eval_policy is None else eval_policy
     lstm_params = None if state.lstm is None else state.lstm.params
@@ -255,7 +264,9 @@ def collect_episode(cfg: TrainConfig, env, enc: GoalEncoder, frozen: Frozen, sta
     n_train = cfg.n_envs
     env_state = jax.vmap(env.reset_episode)(
         _concat(state.env_state, state.test_start),
-        jax.random.split(k_reset, n_train + cfg.n_eval_goals))
+        jnp.concatenate([jax.random.split(k_reset, n_train),
+                         jax.random.split(k_test_reset, cfg.n_eval_goals)]))
+    test_begin = jax.tree.map(lambda x: x[n_train:], env_state)
     test_states, test_rgb, test_lat = test_goals(cfg, env, enc, frozen, scene_params,
                                                  lstm_params, k_test)
     cdf = _skew_cdf_of(cfg, enc, state)  # the buffer is fixed for the whole episode
@@ -325,6 +336,7 @@ def collect_episode(cfg: TrainConfig, env, enc: GoalEncoder, frozen: Frozen, sta
     final_dist = jnp.sum(jnp.square(achieved[:, -1] - goals), -1)
     metrics = {"rollout_latent_dist": final_dist.mean(),
                "test_distances": jax.vmap(env.goal_distance)(test_final, test_states),
+               "test_start_distances": jax.vmap(env.goal_distance)(test_begin, test_states),
                "test_video": video, "test_goal_image": test_rgb[0]}
     if interleave:
         metrics["sac_state"] = sac_state
@@ -425,9 +437,10 @@ def make_chunk(cfg: TrainConfig, env):
         interleave = cfg.sac_schedule == "step"
         eval_policy = state.sac.policy_params
 
-        def episode(s, k):
+        def episode(s, k_i):
+            k, i = k_i
             es, traj, log_p, m = collect_episode(cfg, env, enc, frozen, s, k, plan.act_random,
-                                                 prior, plan.learn, eval_policy)
+                                                 prior, plan.learn, eval_policy, i)
             if interleave:
                 s = s.replace(sac=m.pop("sac_state"))
             s = store_episodes(s, traj, log_p).replace(
@@ -435,10 +448,13 @@ def make_chunk(cfg: TrainConfig, env):
             return s, m
 
         start_train = state.last_train
-        state, col_m = jax.lax.scan(episode, state,
-                                    jax.random.split(k_col, cfg.episodes_per_epoch))
+        state, col_m = jax.lax.scan(
+            episode, state, (jax.random.split(k_col, cfg.episodes_per_epoch),
+                             jnp.arange(cfg.episodes_per_epoch)))
         dist = col_m.pop("test_distances").reshape(-1)  # [episodes * G]
+        start = col_m.pop("test_start_distances").reshape(-1)
         evaluation = {"final_distance": dist.mean(), "final_distance_median": jnp.median(dist),
+                      "start_distance": start.mean(),
                       "distances": dist, "video": col_m.pop("test_video")[0],
                       "goal_image": col_m.pop("test_goal_image")[0], "train": start_train}
         metrics = jax.tree.map(jnp.mean, col_m)

@@ -245,7 +245,8 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
         for s in range(cfg.seeds):
             row = {"env_steps": env_steps, "seed": s,
                    "final_distance": float(ev["final_distance"][s]),
-                   "final_distance_median": float(ev["final_distance_median"][s])}
+                   "final_distance_median": float(ev["final_distance_median"][s]),
+                   "start_distance": float(ev["start_distance"][s])}
             row.update({k: float(v[s]) for k, v in ev["train"].items()})
             rows.append(row)
         if main:
@@ -274,6 +275,7 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
             rate = (env_steps - steps_last) * cfg.seeds / max(now - t_last, 1e-9)
             t_last, steps_last = now, env_steps
             bar.set_postfix(dist=f"{np.median(metrics['eval']['final_distance']):.3f}",
+                            start=f"{np.median(metrics['eval']['start_distance']):.3f}",
                             sps=f"{rate:.0f}")
     mgr.wait_until_finished()  # the state is donated below: the checkpoint must be on disk
     evaluated = any(r["env_steps"] == cfg.total_env_steps for r in rows)  # resumed, finished

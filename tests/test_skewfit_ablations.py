@@ -117,8 +117,8 @@ def test_buffer_prior_matches_the_stored_frame_latents():
 def test_store_episodes_writes_log_p_to_the_ring_slots():
     state = loop.TrainState(sac=None, scene_vae=None, lstm=None,
                             buffer=replay.init_buffer(CAP, T, (HW, HW, 3), A, DG, DG),
-                            skew_log_p=jnp.zeros((CAP, T1)), env_state=None, test_start=None, last_train={}, key=None,
-                            env_steps=None, epoch=None)
+                            skew_log_p=jnp.zeros((CAP, T1)), env_state=None, test_start=None,
+                            last_train={}, key=None, env_steps=None, epoch=None, eval_key=None)
     store = jax.jit(loop.store_episodes)
     for first in (0, 2, 4):  # slots 0,1 / 2,3 / 4,0
         ids = jnp.arange(first, first + 2, dtype=jnp.float32)

@@ -69,6 +69,18 @@ def test_writes_all_outputs(runs):
     assert all(float(r["q_loss"]) > 0 for r in table[2:])
 
 
+def test_every_evaluation_of_a_seed_chases_the_same_goals(runs):
+    """The test envs' starts and goals are fixed per seed (state.eval_key): the start-to-goal
+    distance is the same in all 3 evaluations of a seed, differs between seeds, and the
+    policy's final distances are measured on them."""
+    _, _, rows, *_ = runs
+    start = {s: [r["start_distance"] for r in rows if r["seed"] == s] for s in (0, 1)}
+    for s in (0, 1):
+        assert len(start[s]) == 3 and start[s][0] > 0.01
+        np.testing.assert_allclose(start[s], start[s][0], rtol=1e-6)
+    assert abs(start[0][0] - start[1][0]) > 1e-4
+
+
 def test_chunk_traced_once(runs):
     *_, traces = runs
     assert traces == 1

@@ -1,0 +1,41 @@
+"""bench/paired.py: the paired figures of two runs' metrics rows."""
+
+import importlib.util
+import os
+
+import numpy as np
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+@pytest.fixture(scope="module")
+def paired():
+    spec = importlib.util.spec_from_file_location("bench_paired",
+                                                  os.path.join(ROOT, "bench", "paired.py"))
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _rows(dist):  # dist[eval][seed]
+    return [{"env_steps": 1000 * i, "seed": s, "final_distance": d}
+            for i, per_seed in enumerate(dist) for s, d in enumerate(per_seed)]
+
+
+def test_compare_pairs_evaluations_and_counts_wins(paired):
+    goals = np.array([[0.10, 0.08], [0.12, 0.06], [0.05, 0.09], [0.11, 0.07]])  # shared jitter
+    a, b = goals - 0.01, goals + 0.01
+    a[3, 0] += 0.05  # one evaluation where A is worse
+    out = paired.compare(_rows(a.tolist()), _rows(b.tolist()), from_steps=1000)
+    assert out["n_evaluations"] == 3 and out["evaluations_a_below_b"] == 2
+    np.testing.assert_allclose(out["paired_diff_mean"], (-0.02 * 6 + 0.05) / 6, atol=1e-12)
+    assert out["corr_per_seed_eval"] > 0.5  # the goals' jitter shows in both runs
+    np.testing.assert_allclose(out["median_a"][0], np.median(a[0]))
+
+
+def test_compare_refuses_runs_that_do_not_pair(paired):
+    with pytest.raises(ValueError, match="do not share evaluation steps and seeds"):
+        paired.compare(_rows([[0.1, 0.1]]), _rows([[0.1, 0.1], [0.1, 0.1]]))
+    with pytest.raises(ValueError, match="--from-steps 5000 is past the last evaluation 0"):
+        paired.compare(_rows([[0.1]]), _rows([[0.2]]), from_steps=5000)
