@@ -29,7 +29,9 @@ def train_scene_vae(cfg: TrainConfig, state, key, n_batches):
         return vs, loss + m["loss"]
 
     vs, loss_sum = jax.lax.fori_loop(0, n_batches, body, (state.scene_vae, jnp.float32(0)))
-    log_p = skewfit.frame_log_p(cfg, vs.params, buf.images, k_lp)
+    log_p = replay.map_filled(lambda ep: skewfit.log_likelihood(cfg, vs.params, *ep),
+                              (buf.images, jax.random.split(k_lp, buf.capacity)),
+                              state.skew_log_p, buf.size, LOG_P_CHUNK)
     return (state.replace(scene_vae=vs, skew_log_p=log_p),
             {"vae_loss": loss_sum / jnp.maximum(n_batches, 1)})
 
@@ -67,6 +69,8 @@ def train_lstm(cfg: TrainConfig, enc: GoalEncoder, frozen: Frozen, state, key,
 
 
 REFRESH_CHUNK = 64  # episodes encoded at a time when the buffer's latents are recomputed
+# episodes per block of the buffer's log p(x): 4 x 51 frames x skew_num_latents decodes
+LOG_P_CHUNK = 4
 
 
 def refresh_scene(cfg: TrainConfig, enc: GoalEncoder, state):

@@ -42,6 +42,9 @@ def learning_curve(rows: list[dict], path: str, title: str) -> None:
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(4.5, 3.2))
     plot_median_band(ax, rows, "median over seeds (band 25-75%)")
+    if rows and "start_distance" in rows[0]:  # the (fixed) test goals' distance at step 0
+        ax.axhline(float(np.median([r["start_distance"] for r in rows])), color="grey",
+                   ls="--", lw=1, label="test goals at their start")
     ax.set_title(title)
     ax.legend(fontsize=7)
     fig.tight_layout()
@@ -49,3 +52,28 @@ def learning_curve(rows: list[dict], path: str, title: str) -> None:
     plt.close(fig)
 
 
+
+
+def policy_panel(evaluations: list[dict], labels: list[str], goals: list[int], path: str) -> None:
+    """The paper's policy visualisation: per goal (a row), the goal image, then each
+    evaluation's final frame (seed 0) with its final distance. `evaluations`: dicts with
+    "goal_images" [G, H, W, 3], "final_frames" [G, H, W, 3], "final_distance" [G] (or None);
+    all evaluated on the same goal images (`roll_jax.evaluate` with the same --seed)."""
+    plt = pyplot()
+    cols = 1 + len(evaluations)
+    fig, axes = plt.subplots(len(goals), cols, figsize=(1.6 * cols, 1.6 * len(goals)),
+                             squeeze=False)
+    for r, g in enumerate(goals):
+        panels = [(evaluations[0]["goal_images"][g], "goal")]
+        for ev, label in zip(evaluations, labels):
+            d = ev["final_distance"]
+            panels.append((ev["final_frames"][g],
+                           label if d is None else f"{label}: {d[g] * 100:.1f} cm"))
+        for c, (img, text) in enumerate(panels):
+            axes[r, c].imshow(img, interpolation="nearest")
+            axes[r, c].set_xticks([])
+            axes[r, c].set_yticks([])
+            axes[r, c].set_title(text, fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)

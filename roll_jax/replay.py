@@ -106,16 +106,34 @@ def add_trajectories(buffer: ReplayBuffer, traj: Trajectory) -> ReplayBuffer:
     )
 
 
+def map_filled(fn: Callable, source, old: jax.Array, size, chunk: int) -> jax.Array:
+    """new[i] = fn(source[i]) for the filled episode slots i < size, old[i] for the others:
+    `source` a pytree of per-episode arrays [N, ...], `old` [N, ...]. Runs over blocks of
+    about `chunk` episodes (fn vmapped inside a lax.map, so peak memory is one block of
+    activations), and skips the blocks wholly past `size` (a buffer fills over the run, and
+    a refresh of the empty part would cost as much as of the filled one)."""
+    n = old.shape[0]
+    c = max(d for d in range(1, min(chunk, n) + 1) if n % d == 0)  # blocks tile the slots
+    blocks = lambda x: x.reshape((n // c, c) + x.shape[1:])  # noqa: E731
+
+    def block(args):
+        i, src, prev = args
+        return jax.lax.cond(i * c < size, lambda: jax.vmap(fn)(src).astype(prev.dtype),
+                            lambda: prev)
+
+    new = jax.lax.map(block, (jnp.arange(n // c), jax.tree.map(blocks, source), blocks(old)))
+    new = new.reshape(old.shape)
+    filled = (jnp.arange(n) < size).reshape((-1,) + (1,) * (old.ndim - 1))
+    return jnp.where(filled, new, old)
+
+
 def recompute(buffer: ReplayBuffer, field: str, fn: Callable, source: jax.Array,
               chunk: int) -> ReplayBuffer:
     """buffer.<field>[i] = fn(source[i]) for every filled episode slot i (`source`: one of the
-    buffer's per-episode arrays, e.g. buffer.images), `chunk` episodes at a time (fn vmapped
-    over them inside a lax.map, so peak memory is one chunk of activations). Unfilled slots
-    keep their values."""
-    old = getattr(buffer, field)
-    new = jax.lax.map(fn, source, batch_size=min(chunk, buffer.capacity))
-    filled = (jnp.arange(buffer.capacity) < buffer.size).reshape((-1,) + (1,) * (old.ndim - 1))
-    return buffer.replace(**{field: jnp.where(filled, new.astype(old.dtype), old)})
+    buffer's per-episode arrays, e.g. buffer.images), about `chunk` episodes at a time
+    (`map_filled`). Unfilled slots keep their values."""
+    return buffer.replace(**{field: map_filled(fn, source, getattr(buffer, field), buffer.size,
+                                               chunk)})
 
 
 def goal_counts(batch_size: int, fracs: Sequence[float]) -> tuple[int, int, int]:

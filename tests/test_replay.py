@@ -73,7 +73,8 @@ def test_recompute_updates_filled_slots_only():
         run = jnp.cumsum(m) / jnp.arange(1, T + 2)
         return jnp.stack([run, -run], axis=1)
 
-    # chunk = 4 does not divide CAP = 6: exercises lax.map's remainder path.
+    # chunk = 4 does not divide CAP = 6: blocks of 3 slots (the largest divisor), the second
+    # one partly filled.
     @jax.jit
     def refresh(b):
         b = replay.recompute(b, "obs_latents", obs_enc, b.images, 4)
@@ -88,6 +89,18 @@ def test_recompute_updates_filled_slots_only():
     assert np.all(np.asarray(new.obs_latents[4:]) == sentinel)
     assert np.all(np.asarray(new.goal_latents[4:]) == sentinel)
     np.testing.assert_array_equal(new.images, buf.images)
+
+
+def test_map_filled_skips_empty_blocks_and_keeps_their_values():
+    """Slots past `size` keep `old`, also in a block that is skipped whole (size 2 of 6,
+    blocks of 3); fn takes a pytree of per-episode arrays."""
+    src = (jnp.arange(6.0), 10 * jnp.arange(6.0))
+    old = jnp.full((6,), -1.0)
+    for size, want in ((2, [10, 21, -1, -1, -1, -1]), (4, [10, 21, 32, 43, -1, -1]),
+                       (6, [10, 21, 32, 43, 54, 65])):
+        got = jax.jit(lambda s: replay.map_filled(lambda e: e[0] + e[1] + 10, src, old, s, 3))(
+            jnp.int32(size))
+        np.testing.assert_array_equal(np.asarray(got), np.asarray(want, np.float32))
 
 
 def _reference(buf, idx, prior_goals, fracs):
