@@ -34,8 +34,13 @@ def per_eval(rows: list[dict]) -> dict[int, dict[int, float]]:
     return out
 
 
-def compare(rows_a: list[dict], rows_b: list[dict], from_steps: int = 0) -> dict:
-    """The paired figures of two runs' metrics rows (same evaluation steps and seeds)."""
+def compare(rows_a: list[dict], rows_b: list[dict], from_steps: int = 0,
+            to_steps: int | None = None) -> dict:
+    """The paired figures of two runs' metrics rows (same evaluation steps and seeds, up to
+    `to_steps` when given: a longer run against the first part of a shorter one)."""
+    if to_steps is not None:
+        rows_a, rows_b = ([r for r in rows if r["env_steps"] <= to_steps]
+                          for rows in (rows_a, rows_b))
     a, b = per_eval(rows_a), per_eval(rows_b)
     if sorted(a) != sorted(b) or any(sorted(a[s]) != sorted(b[s]) for s in a):
         raise ValueError("the two runs do not share evaluation steps and seeds: "
@@ -50,6 +55,7 @@ def compare(rows_a: list[dict], rows_b: list[dict], from_steps: int = 0) -> dict
     xb = np.array([b[steps[i]][k] for i in late for k in sorted(b[steps[i]])])
     diff = xa - xb
     return {"env_steps": steps, "median_a": med_a, "median_b": med_b, "from_steps": from_steps,
+            "to_steps": to_steps,
             "n_evaluations": len(late),
             "mean_median_a": float(np.mean([med_a[i] for i in late])),
             "mean_median_b": float(np.mean([med_b[i] for i in late])),
@@ -67,6 +73,8 @@ def main(argv=None) -> dict:
     p.add_argument("--b", required=True, help="run directory B")
     p.add_argument("--name", required=True)
     p.add_argument("--from-steps", type=int, default=0)
+    p.add_argument("--to-steps", type=int, default=None,
+                   help="compare evaluations up to this env step only")
     a = p.parse_args(argv)
     from roll_jax import run_dir, train
 
@@ -82,7 +90,7 @@ def main(argv=None) -> dict:
     out = {"name": a.name, "a": a.a, "b": a.b, "task": ca.task, "seeds": ca.seeds,
            "command": "python bench/paired.py " + " ".join(argv if argv is not None
                                                            else sys.argv[1:]),
-           **compare(rows_a, rows_b, a.from_steps)}
+           **compare(rows_a, rows_b, a.from_steps, a.to_steps)}
     path = os.path.join(ROOT, "bench", "results", f"paired_{a.name}.json")
     with open(path, "w") as f:
         json.dump(out, f, indent=2)
@@ -91,7 +99,7 @@ def main(argv=None) -> dict:
     print(f"from {a.from_steps}: mean of medians A {out['mean_median_a'] * 100:.2f} cm, "
           f"B {out['mean_median_b'] * 100:.2f} cm; A below B in {out['evaluations_a_below_b']}"
           f"/{out['n_evaluations']}; paired A-B {out['paired_diff_mean'] * 100:.2f} +- "
-          f"{out['paired_diff_sem'] * 100:.2f} cm; corr {out['corr_per_seed_eval']:.2f}; "
+          f"{out['paired_diff_sem'] * 100:.2f} cm; corr {out['corr_per_seed_eval']}; "
           f"wrote {path}")
     return out
 

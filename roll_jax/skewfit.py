@@ -15,20 +15,30 @@ from roll_jax import encoders, replay
 from roll_jax.models import ConvVAE, to_float
 
 
+# The per-pixel variance of rlkit's "gaussian_identity_variance" decoder as its estimator uses
+# it: decode returns (clamped mean, ones) as (mean, log-variance), and compute_log_p_log_q_log_d
+# exponentiates the ones (rlkit vae_trainer.py; the same in ROLL/LSTM_trainer.py).
+REFERENCE_DECODER_VARIANCE = math.e
+
+
 def log_likelihood(cfg: TrainConfig, params, images, key):
-    """Skew-Fit's importance-sampled log p(x) under the scene-VAE (Gaussian identity-variance
-    decoder), with cfg.skew_num_latents samples of q(z|x) (rlkit's estimator)."""
+    """Skew-Fit's estimate of log p(x) under the scene-VAE, as rlkit computes it
+    (compute_p_x_np_to_np, importance sampling with cfg.skew_num_latents samples of q(z|x)):
+    the MEAN over the samples of log p(z) - log q(z|x) + log d(x|z), with d Gaussian around
+    the decoder mean clamped to [0, 1] with variance e per pixel
+    (`REFERENCE_DECODER_VARIANCE`). Terms equal for every image are dropped (the skew weights
+    are normalised). The variance sets how sharply p(x)^alpha skews: with variance 1 the
+    weights are e times sharper in log space."""
     model = encoders.vae_model(cfg.scene)
     mean, logvar = model.apply(params, images, method=ConvVAE.encode)
-    k = cfg.skew_num_latents
-    eps = jax.random.normal(key, (k,) + mean.shape)
+    eps = jax.random.normal(key, (cfg.skew_num_latents,) + mean.shape)
     z = mean + jnp.exp(0.5 * logvar) * eps  # [K, B, d]
-    recon = model.apply(params, z, method=ConvVAE.decode)
+    recon = jnp.clip(model.apply(params, z, method=ConvVAE.decode), 0.0, 1.0)
     x = to_float(images)
-    log_px_z = -0.5 * jnp.sum(jnp.square(recon - x), axis=(-3, -2, -1))
+    log_d = -0.5 * jnp.sum(jnp.square(recon - x), axis=(-3, -2, -1)) / REFERENCE_DECODER_VARIANCE
     log_pz = -0.5 * jnp.sum(jnp.square(z), -1)
     log_qz = -0.5 * jnp.sum(jnp.square(eps) + logvar, -1)
-    return jax.nn.logsumexp(log_px_z + log_pz - log_qz, axis=0) - math.log(k)
+    return jnp.mean(log_d + log_pz - log_qz, axis=0)
 
 
 def frame_log_p(cfg: TrainConfig, params, images, key, batch_size: int = 256):

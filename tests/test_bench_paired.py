@@ -37,5 +37,7 @@ def test_compare_pairs_evaluations_and_counts_wins(paired):
 def test_compare_refuses_runs_that_do_not_pair(paired):
     with pytest.raises(ValueError, match="do not share evaluation steps and seeds"):
         paired.compare(_rows([[0.1, 0.1]]), _rows([[0.1, 0.1], [0.1, 0.1]]))
+    short = paired.compare(_rows([[0.1], [0.2], [0.3]]), _rows([[0.2], [0.1]]), to_steps=1000)
+    assert short["env_steps"] == [0, 1000] and short["evaluations_a_below_b"] == 1
     with pytest.raises(ValueError, match="--from-steps 5000 is past the last evaluation 0"):
         paired.compare(_rows([[0.1]]), _rows([[0.2]]), from_steps=5000)
