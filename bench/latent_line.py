@@ -87,9 +87,9 @@ def main(argv=None) -> dict:
                                                                else sys.argv[1:]),
            "profiles": {}}
     for kind, z in latents.items():
-        out["profiles"][kind] = {f"{xs[g]:+.3f}": {
-            "distance": np.linalg.norm(z - z[g], axis=-1).tolist(),
-            "fold": fold(np.linalg.norm(z - z[g], axis=-1), g)} for g in goals}
+        dist = {g: np.linalg.norm(z - z[g], axis=-1) for g in goals}
+        out["profiles"][kind] = {f"{xs[g]:+.3f}": {"distance": d.tolist(), "fold": fold(d, g)}
+                                 for g, d in dist.items()}
     plt = plots.pyplot()
     fig, axes = plt.subplots(1, len(latents), figsize=(4 * len(latents), 3), sharex=True)
     for ax, (kind, prof) in zip(axes, out["profiles"].items()):

@@ -245,8 +245,8 @@ def collect_episode(cfg: TrainConfig, env, enc: GoalEncoder, frozen: Frozen, sta
     The test envs start from resets, chase test goals (`test_goals`) with the deterministic
     policy and are neither stored nor learned from; starts and goals come from
     state.eval_key and `episode_index` (the episode's place in its chunk), so every
-    evaluation of a seed sees the same ones (reset-free tasks carry their test envs' states
-    on, as their training envs do). Sharing the batch costs G
+    evaluation of a seed sees the same ones (reset-free tasks restart them from their fixed
+    `test_start` states). Sharing the batch costs G
     more envs per step but no second compiled copy of MJX's step (the largest compile), and
     one reset serves both. Each frame is encoded once (the policy's observation is the
     stored scene latent). `prior`: what prior goals are drawn from (`goal_prior`).

@@ -15,8 +15,8 @@ from roll_jax.goal_encoding import Frozen, GoalEncoder
 
 def train_scene_vae(cfg: TrainConfig, state, key, n_batches):
     """`n_batches` scene-VAE steps on replay images drawn with Skew-Fit weights (from the
-    stored log p(x) under the current VAE), then log p(x) of the whole buffer under the
-    trained VAE (rlkit recomputes its priorities after training too)."""
+    stored log p(x) under the current VAE), then log p(x) of the buffer's filled episodes
+    under the trained VAE (rlkit recomputes its priorities after training too)."""
     buf = state.buffer
     k_lp, k_train = jax.random.split(key)
     cdf = skewfit.skew_cdf(state.skew_log_p, cfg.skew_alpha, buf.size)
@@ -29,7 +29,7 @@ def train_scene_vae(cfg: TrainConfig, state, key, n_batches):
         return vs, loss + m["loss"]
 
     vs, loss_sum = jax.lax.fori_loop(0, n_batches, body, (state.scene_vae, jnp.float32(0)))
-    log_p = replay.map_filled(lambda ep: skewfit.log_likelihood(cfg, vs.params, *ep),
+    log_p = replay.map_filled(lambda ep: skewfit.frame_log_p(cfg, vs.params, *ep),
                               (buf.images, jax.random.split(k_lp, buf.capacity)),
                               state.skew_log_p, buf.size, LOG_P_CHUNK)
     return (state.replace(scene_vae=vs, skew_log_p=log_p),

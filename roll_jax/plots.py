@@ -52,8 +52,6 @@ def learning_curve(rows: list[dict], path: str, title: str) -> None:
     plt.close(fig)
 
 
-
-
 def policy_panel(evaluations: list[dict], labels: list[str], goals: list[int], path: str) -> None:
     """The paper's policy visualisation: per goal (a row), the goal image, then each
     evaluation's final frame (seed 0) with its final distance. `evaluations`: dicts with

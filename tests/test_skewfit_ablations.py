@@ -305,3 +305,27 @@ def test_log_likelihood_is_the_reference_estimator():
     log_qz = -0.5 * (np.square(eps) + logvar).sum(-1)
     np.testing.assert_allclose(got, (log_d + log_pz - log_qz).mean(0), rtol=1e-4)
     assert got[0] > got[1] and got[0] > got[2]
+
+
+def test_online_scene_vae_round_recomputes_log_p_of_the_filled_episodes_only():
+    """After a scene-VAE round, skew_log_p holds frame_log_p of every filled episode under the
+    trained VAE (one key per episode, `replay.map_filled`) and keeps the unfilled slots."""
+    cfg = make_config("puck_push", "skewfit", "smoke")
+    vae = encoders.init_vae(jax.random.PRNGKey(0), cfg.scene)
+    cap, t = 4, 2
+    buf = replay.init_buffer(cap, t, (48, 48, 3), A, cfg.scene.latent_dim, cfg.scene.latent_dim)
+    rng = np.random.default_rng(1)
+    buf = buf.replace(images=jnp.asarray(rng.integers(0, 256, buf.images.shape), jnp.uint8),
+                      size=jnp.int32(3))
+    state = loop.TrainState(sac=None, scene_vae=vae, lstm=None, buffer=buf,
+                            skew_log_p=jnp.full((cap, t + 1), -5.0), env_state=None,
+                            test_start=None, last_train={}, key=None, env_steps=None,
+                            epoch=None, eval_key=None)
+    key = jax.random.PRNGKey(2)
+    new, _ = jax.jit(lambda s: online_training.train_scene_vae(cfg, s, key, 2))(state)
+    keys = jax.random.split(jax.random.split(key)[0], cap)  # train_scene_vae's k_lp
+    for i in range(3):
+        np.testing.assert_allclose(
+            new.skew_log_p[i], skewfit.frame_log_p(cfg, new.scene_vae.params, buf.images[i],
+                                                   keys[i]), rtol=1e-4)
+    np.testing.assert_array_equal(np.asarray(new.skew_log_p[3]), -5.0)
