@@ -6,10 +6,24 @@ import os
 import time
 
 
+def cpu_model() -> str:
+    """The CPU's model name (/proc/cpuinfo; "" elsewhere): this project's 2-core machines
+    differ by ~2.5x in speed, so every timed figure names the one it ran on."""
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return ""
+
+
 def write_results(path: str, res: dict) -> None:
     """Stamp the load average at the end (was the machine shared?), write `res` to `path`
     (creating its folder) and say so."""
     res["load_average_at_end"] = list(os.getloadavg())
+    res.setdefault("cpu_model", cpu_model())
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     with open(path, "w") as f:
         json.dump(res, f, indent=2)

@@ -24,6 +24,10 @@ import sys
 import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+
+from bench.common import cpu_model  # noqa: E402
+
 RESULTS = os.path.join(ROOT, "bench", "results", "encoders_cpu.json")
 
 
@@ -66,7 +70,7 @@ def main(argv=None) -> None:
         t_an, out = _run(["roll_jax.analysis", "latent-vs-distance", "--task", task,
                           "--ckpt", d, "--seed", str(a.seed)])
         res = _last_json(out)
-        row = {"task": task, "preset": "cpu", "seed": a.seed,
+        row = {"task": task, "preset": "cpu", "seed": a.seed, "cpu_model": cpu_model(),
                "segmentation_s": round(t_seg, 1), "pretrain_s": round(t_pre, 1),
                "analysis_s": round(t_an, 1),
                "segmentation": {k: seg.get(k) for k in seg if not isinstance(seg[k], list)},

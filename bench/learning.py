@@ -31,6 +31,8 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import numpy as np  # noqa: E402
 
+from bench.common import cpu_model  # noqa: E402
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RESULTS = os.path.join(ROOT, "bench", "results")
 
@@ -101,7 +103,8 @@ def main(argv=None) -> dict:
            "config": run_dir.config_json(cfg), "curve": summarize(rows, a.target),
            "wall_s": round(wall, 1), "timings": timings,
            "machine": {"device": str(jax.devices()[0]), "cpu_count": os.cpu_count(),
-                       "platform": platform.machine(), "jax": jax.__version__,
+                       "platform": platform.machine(), "cpu_model": cpu_model(),
+                       "jax": jax.__version__,
                        "load_avg_start": [round(x, 2) for x in load0],
                        "load_avg_end": [round(x, 2) for x in os.getloadavg()]}}
     os.makedirs(RESULTS, exist_ok=True)

@@ -6,6 +6,8 @@ correlation between pairwise latent and pairwise puck distances.
 
     python bench/object_vae.py --seg runs/seg/puck_push/ckpt --steps 1500 --name paper
     python bench/object_vae.py --seg ... --name beta1_nomatch --set beta=1 matching_coef=0
+    python bench/object_vae.py --seg gt ...            # ground-truth masks (segmentation's bound)
+    python bench/object_vae.py --seg ... --scene ...   # the scene-VAE on the whole images
 
 `--set` overrides `object_vae_config("puck_push")` fields (the paper's values by default).
 Appends one entry per run to bench/results/object_vae.json. See docs/analysis.md.
@@ -23,7 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import envs_mjx
-from configs.encoders import VAEConfig, object_vae_config
+from configs.encoders import VAEConfig, object_vae_config, scene_vae_config
 from configs.overrides import field_overrides
 from roll_jax import analysis, encoders
 from roll_jax.segmentation import pipeline
@@ -33,15 +35,18 @@ N_IMAGES, N_TEST, STEPS_PER_CALL, EVAL_EVERY = 2000, 500, 50, 250
 
 
 def segmented_data(env, seg, seed: int, n: int):
+    """Segmented images, object masks and object states of `n` random placements; `seg=None`
+    segments with the renderer's ground-truth labels (an upper bound for `segment`)."""
     @jax.jit
     def batch(keys):
         def one(k):
             st = env.random_placement(*jax.random.split(k))
-            return env.render(st), env.object_state(st)
+            rgb, labels = env.render_both(st)
+            return rgb, labels, env.object_state(st)
 
-        rgb, pos = jax.vmap(one)(keys)
-        masks = pipeline.segment(seg, rgb)
-        return pipeline.segmented_image(rgb, masks), masks, pos
+        rgb, labels, pos = jax.vmap(one)(keys)
+        masks = labels == 2 if seg is None else pipeline.segment(seg, rgb)
+        return pipeline.segmented_image(rgb, masks), masks, pos, rgb
 
     parts = [batch(jax.random.split(jax.random.PRNGKey(seed + i), 250)) for i in range(n // 250)]
     return tuple(jnp.concatenate(p) for p in zip(*parts))
@@ -49,22 +54,36 @@ def segmented_data(env, seg, seed: int, n: int):
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seg", required=True, help="a puck_push segmentation checkpoint dir")
+    ap.add_argument("--seg", required=True,
+                    help="a puck_push segmentation checkpoint dir, or 'gt' for ground-truth masks")
+    ap.add_argument("--scene", action="store_true",
+                    help="train the scene-VAE config on the whole (unsegmented) images instead")
     ap.add_argument("--steps", type=int, default=1500)
+    ap.add_argument("--n-train", type=int, default=N_IMAGES - N_TEST,
+                    help="training images (a multiple of 250); 500 more are held out")
     ap.add_argument("--name", default="paper")
+    ap.add_argument("--seed", type=int, default=0,
+                    help="the VAE's initialisation and batches (the data stays the same)")
     ap.add_argument("--set", nargs="*", default=[], metavar="FIELD=VALUE")
     a = ap.parse_args()
     if a.steps < EVAL_EVERY or a.steps % EVAL_EVERY:
         raise SystemExit(f"--steps must be a positive multiple of {EVAL_EVERY}, got {a.steps}")
     try:
-        cfg = object_vae_config("puck_push", **field_overrides(VAEConfig, a.set))
+        make = scene_vae_config if a.scene else object_vae_config
+        cfg = make("puck_push", **field_overrides(VAEConfig, a.set))
     except ValueError as e:
         raise SystemExit(f"error: {e}") from None
     env = envs_mjx.make("puck_push")
-    seg, _ = pipeline.load(a.seg, "puck_push")
+    seg = None if a.seg == "gt" else pipeline.load(a.seg, "puck_push")[0]
     t0 = time.time()
-    images, masks, pos = segmented_data(env, seg, 0, N_IMAGES)
-    n_train = N_IMAGES - N_TEST
+    if a.n_train <= 0 or a.n_train % 250:
+        raise SystemExit(f"--n-train must be a positive multiple of 250, got {a.n_train}")
+    # The held-out images come from their own keys, so they are the same for any --n-train.
+    images, masks, pos, rgb = (jnp.concatenate(p) for p in zip(
+        segmented_data(env, seg, 0, a.n_train), segmented_data(env, seg, 10_000, N_TEST)))
+    if a.scene:
+        images = rgb
+    n_train = a.n_train
     test_images, test_xy = images[n_train:], np.asarray(pos[n_train:])[:, :2]
     print(f"data {time.time() - t0:.0f} s, object pixels per image "
           f"{float(masks.sum((1, 2)).mean()):.1f}", flush=True)
@@ -80,10 +99,11 @@ def main() -> None:
 
     rng = np.random.default_rng(0)
     pi, pj = rng.integers(0, N_TEST, 3000), rng.integers(0, N_TEST, 3000)
-    state = encoders.init_vae(jax.random.PRNGKey(0), cfg)
+    state = encoders.init_vae(jax.random.PRNGKey(a.seed), cfg)
     rows = []
     for it in range(a.steps // STEPS_PER_CALL):
-        state, m = train(state, jax.random.PRNGKey(100 + it))
+        state, m = train(state, jax.random.fold_in(jax.random.PRNGKey(100 + it), a.seed)
+                         if a.seed else jax.random.PRNGKey(100 + it))
         step = (it + 1) * STEPS_PER_CALL
         if step % EVAL_EVERY:
             continue
@@ -103,7 +123,8 @@ def main() -> None:
     if os.path.exists(RESULTS):
         with open(RESULTS) as f:
             results = json.load(f)
-    results.append({"name": a.name, "config": dataclasses.asdict(cfg), "seg": a.seg,
+    results.append({"name": a.name, "seed": a.seed, "model": "scene" if a.scene else "object",
+                    "config": dataclasses.asdict(cfg), "seg": a.seg,
                     "n_train": n_train, "n_test": N_TEST, "jax_backend": jax.default_backend(),
                     "rows": rows})
     os.makedirs(os.path.dirname(RESULTS), exist_ok=True)
