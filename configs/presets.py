@@ -3,8 +3,10 @@
 - `paper`: nothing overridden; the paper's sizes and schedules (GPU-sized: 300k-400k env
   steps, SAC 400-300 at batch 1024).
 - `cpu`: sized by measurement for a 2-core CPU (docs/training.md, "The cpu preset"): the
-  paper's method and loss weights, smaller networks, batches and run, a frozen-after-pretraining
-  scene-VAE for ROLL, cached latents refreshed on a schedule. Each departure says why.
+  paper's method, smaller networks, batches and run, shorter pretraining (with a smaller
+  object-VAE KL weight and VAE matching coefficient, a faster U-Net learning rate), a
+  frozen-after-pretraining scene-VAE for ROLL, cached latents refreshed on a schedule. Each
+  departure says why.
 - `smoke`: the whole path end to end in minutes (tests, `reproduce --preset smoke`); far too
   short to learn.
 
