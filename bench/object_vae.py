@@ -68,6 +68,8 @@ def main() -> None:
     a = ap.parse_args()
     if a.steps < EVAL_EVERY or a.steps % EVAL_EVERY:
         raise SystemExit(f"--steps must be a positive multiple of {EVAL_EVERY}, got {a.steps}")
+    if a.n_train <= 0 or a.n_train % 250:
+        raise SystemExit(f"--n-train must be a positive multiple of 250, got {a.n_train}")
     try:
         make = scene_vae_config if a.scene else object_vae_config
         cfg = make("puck_push", **field_overrides(VAEConfig, a.set))
@@ -76,8 +78,6 @@ def main() -> None:
     env = envs_mjx.make("puck_push")
     seg = None if a.seg == "gt" else pipeline.load(a.seg, "puck_push")[0]
     t0 = time.time()
-    if a.n_train <= 0 or a.n_train % 250:
-        raise SystemExit(f"--n-train must be a positive multiple of 250, got {a.n_train}")
     # The held-out images come from their own keys, so they are the same for any --n-train.
     images, masks, pos, rgb = (jnp.concatenate(p) for p in zip(
         segmented_data(env, seg, 0, a.n_train), segmented_data(env, seg, 10_000, N_TEST)))

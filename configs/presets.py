@@ -90,7 +90,8 @@ CPU = Preset("cpu", "sized for a 2-core CPU: learns puck pushing within a sessio
         "epochs": 40,
         "batch_size": 64,  # paper 128; the KL keeps beta / 128 (kl_reference_batch)
         # Table 3's beta 20 (KL weight 20/128 per image) lets the latent line of object
-        # positions fold at this budget (pairwise Spearman 0.68); 5 (5/128): 0.82, r2 0.90
+        # positions fold at this budget (pairwise Spearman 0.72-0.78 over init seeds); 5
+        # (5/128): 0.79-0.82, r2 0.84-0.89
         "beta": 5.0,
         "n_pretrain_images": 2000,
         # 1% of Table 2's VAE matching coefficient (push 4, not 400): in 1000 steps the
