@@ -288,13 +288,24 @@ def part_functions(cfg, env, frozen):
 
         return jax.lax.scan(episode, None, (z_steps, goals, jax.random.split(key, n_ep)))[1]
 
+    def prior_of(state, key):  # the chunk's prior-goal bank (loop.goal_prior)
+        return loop.goal_prior(cfg, enc, env, state.buffer, key,
+                               None if state.lstm is None else state.lstm.params)
+
     def sac_one(state, key):
-        s, m = loop.sac_updates(cfg, enc, state, key, n_updates)
+        k_bank, k = jax.random.split(key)
+        s, m = loop.sac_updates(cfg, enc, state, k, n_updates, prior_of(state, k_bank))
         return s.sac, m
 
     def collect_one(fz, state, key, act_random):
+        k_bank, key = jax.random.split(key)
+        prior = prior_of(state, k_bank)
+
         def episode(s, k):
-            out = loop.collect_episode(cfg, env, enc, fz, s, k, act_random)
+            # SAC off: the collection phase alone (with sac_schedule "step" the updates
+            # would run inside it; they are timed by "sac").
+            out = loop.collect_episode(cfg, env, enc, fz, s, k, act_random, prior,
+                                       jnp.bool_(False))
             es, traj, m = out[0], out[1:-1], out[-1]  # (es, traj[, log_p], metrics)
             # Reductions of every trajectory field keep all of it alive (no dead code).
             sums = jax.tree.map(lambda x: jnp.sum(x.astype(jnp.float32)), traj)

@@ -54,7 +54,10 @@ CPU = Preset("cpu", "sized for a 2-core CPU: learns puck pushing within a sessio
     "train": {
         "total_env_steps": 50_000,  # paper 300k-400k: what fits a session on 2 cores
         "n_eval_goals": 8,  # paper 32 per evaluation: the test envs step beside the 10 training envs
-        "eval_every_epochs": 4,  # every 2k env steps (the evaluation runs in every chunk anyway)
+        "eval_every_epochs": 4,  # every 2k env steps: the test envs step in 1 chunk of 4
+        # every 10k env steps (paper: every 10 epochs): each checkpoint writes the 50k-frame
+        # buffer (~0.7 GB per seed), which slows the chunk it overlaps by ~2.5 s here
+        "checkpoint_every_epochs": 20,
         "skew_num_latents": 4,  # paper 10: Skew-Fit's log p(x) per stored frame, 4 decodes
         "refresh_every_epochs": 4,  # cached LSTM latents of the buffer recomputed every 2k steps
         # The reference code's reward (-||z' - z_g||, LSTM_wrapped_env.py); the paper writes
@@ -122,7 +125,7 @@ CPU = Preset("cpu", "sized for a 2-core CPU: learns puck pushing within a sessio
 SMOKE = Preset("smoke", "the whole path in minutes (tests); learns nothing", {
     # Two chunks (3 evaluations: 0, 500, 1000 env steps).
     "train": {"total_env_steps": 1000, "epoch_env_steps": 500, "eval_every_epochs": 1,
-              "n_eval_goals": 4, "vae_schedule": "smoke", "skew_num_latents": 2},
+              "checkpoint_every_epochs": 1, "n_eval_goals": 4, "vae_schedule": "smoke", "skew_num_latents": 2},
     "sac": {"hidden": (32, 32), "batch_size": 64, "replay_size": 2_000, "learning_starts": 200},
     # 50 VAE pre-training steps on batches of 32.
     "scene_vae": {"epochs": 10, "batches_per_epoch": 5, "batch_size": 32, "n_pretrain_images": 200},

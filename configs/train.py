@@ -102,6 +102,9 @@ class TrainConfig:
     use_lstm: bool = True
     use_object_vae: bool = True
     keep_checkpoints: int = 2
+    # The train state (replay buffer included) is checkpointed every this many epochs and at
+    # the end; a resumed run continues from the last one.
+    checkpoint_every_epochs: int = 10
     segmentation: SegmentationConfig = dataclasses.field(default_factory=SegmentationConfig)
     scene_vae: VAEConfig | None = None
     object_vae: VAEConfig | None = None
@@ -117,7 +120,7 @@ class TrainConfig:
             raise ValueError(f"unknown preset {self.preset!r}; expected one of {', '.join(PRESETS)}")
         for name in ("horizon", "total_env_steps", "epoch_env_steps", "n_envs", "seeds",
                      "eval_every_epochs", "n_eval_goals", "vae_online_batch", "skew_num_latents",
-                     "keep_checkpoints", "refresh_every_epochs"):
+                     "keep_checkpoints", "refresh_every_epochs", "checkpoint_every_epochs"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"TrainConfig.{name} must be positive, got {getattr(self, name)}")
         if self.epoch_env_steps % (self.n_envs * self.horizon):

@@ -201,15 +201,24 @@ def frame_stats(buffer: replay.ReplayBuffer):
     return jnp.where(empty, 0.0, mean), jnp.where(empty, 1.0, jnp.sqrt(var))
 
 
-def goal_prior(cfg: TrainConfig, enc: GoalEncoder, env, buffer, key):
-    """What a chunk's prior goals are drawn from: the oracle's bank of goal-space object
-    states; the buffer's frame-latent (mean, std) for cfg.prior_goals "buffer"; None for the
-    standard normal prior (Algorithm 1)."""
+# ROLL's prior goals per chunk: N(0, I) samples through the LSTM, drawn once per chunk (the
+# LSTM does not change while a chunk collects and updates SAC). Encoding 128 fresh ones for
+# each of the chunk's updates cost as much as the SAC update itself (1.3 ms per update on a
+# 2-core CPU); each update now draws its rows from this bank.
+PRIOR_BANK = 4096
+
+
+def goal_prior(cfg: TrainConfig, enc: GoalEncoder, env, buffer, key, lstm_params=None):
+    """What a chunk's prior goals are drawn from (`fresh_goals`): the oracle's bank of
+    goal-space object states; for ROLL a bank of `PRIOR_BANK` goals from the frame encoder's
+    prior N(0, I) (Algorithm 1), or N(mean, std) of the buffer's frame latents for
+    cfg.prior_goals "buffer", through the LSTM; None for Skew-Fit (goals from the buffer)."""
     if enc.oracle:
         return goal_bank(env, key)
-    if cfg.prior_goals == "buffer" and not enc.skewed_goals:
-        return frame_stats(buffer)
-    return None
+    if enc.skewed_goals:
+        return None
+    stats = frame_stats(buffer) if cfg.prior_goals == "buffer" else None
+    return enc.prior_goals(key, lstm_params, PRIOR_BANK, stats)
 
 
 def goal_bank(env, key, n: int = 1024):
@@ -236,7 +245,7 @@ def _concat(a, b):
 
 def collect_episode(cfg: TrainConfig, env, enc: GoalEncoder, frozen: Frozen, state: TrainState,
                     key, act_random, prior=None, learn=None, eval_policy=None,
-                    episode_index=0):
+                    episode_index=0, evaluate: bool = True):
     """One episode of all E training envs and, in the same env batch, of G = n_eval_goals
     test envs -> (env_state, replay.Trajectory [E, ...], Skew-Fit log p(x) of its scene
     images [E, T+1] (zeros when unused, `needs_log_p`), metrics incl. the test envs' final
@@ -254,7 +263,10 @@ def collect_episode(cfg: TrainConfig, env, enc: GoalEncoder, frozen: Frozen, sta
     With cfg.sac_schedule "step", `learn` (bool) switches on n_envs x updates_per_step SAC
     updates after every env step (on the buffer as it was at the episode's start); the test
     envs then act with `eval_policy` (the policy the chunk started from) and the new SAC state
-    and its mean metrics come back in the metrics ("sac_state", "sac")."""
+    and its mean metrics come back in the metrics ("sac_state", "sac").
+
+    `evaluate` False (static) leaves the test envs out of the batch (no test metrics): the
+    training envs' keys, and so their episodes, are the same either way."""
     k_reset, k_goal, k_act, k_lp = jax.random.split(key, 4)
     k_test_reset, k_test = jax.random.split(jax.random.fold_in(state.eval_key, episode_index))
     interleave = cfg.sac_schedule == "step"
@@ -262,24 +274,28 @@ def collect_episode(cfg: TrainConfig, env, enc: GoalEncoder, frozen: Frozen, sta
     lstm_params = None if state.lstm is None else state.lstm.params
     scene_params = state.scene_vae.params
     n_train = cfg.n_envs
-    env_state = jax.vmap(env.reset_episode)(
-        _concat(state.env_state, state.test_start),
-        jnp.concatenate([jax.random.split(k_reset, n_train),
-                         jax.random.split(k_test_reset, cfg.n_eval_goals)]))
-    test_begin = jax.tree.map(lambda x: x[n_train:], env_state)
-    test_states, test_rgb, test_lat = test_goals(cfg, env, enc, frozen, scene_params,
-                                                 lstm_params, k_test)
+    reset_keys = jax.random.split(k_reset, n_train)
     cdf = _skew_cdf_of(cfg, enc, state)  # the buffer is fixed for the whole episode
-    goals = jnp.concatenate([fresh_goals(enc, state.buffer, cdf, lstm_params, k_goal, n_train,
-                                         prior), test_lat])
+    goals = fresh_goals(enc, state.buffer, cdf, lstm_params, k_goal, n_train, prior)
+    if evaluate:
+        env_state = jax.vmap(env.reset_episode)(
+            _concat(state.env_state, state.test_start),
+            jnp.concatenate([reset_keys, jax.random.split(k_test_reset, cfg.n_eval_goals)]))
+        test_begin = jax.tree.map(lambda x: x[n_train:], env_state)
+        test_states, test_rgb, test_lat = test_goals(cfg, env, enc, frozen, scene_params,
+                                                     lstm_params, k_test)
+        goals = jnp.concatenate([goals, test_lat])
+    else:
+        env_state = jax.vmap(env.reset_episode)(state.env_state, reset_keys)
     is_test = (jnp.arange(goals.shape[0]) >= n_train)[:, None]
     test0 = lambda es: jax.tree.map(lambda x: x[n_train], es)  # noqa: E731
 
     def observe(es):
-        """(what the step records, the policy's observation [E+G, ds]) of the env states."""
+        """(what the step records, the policy's observation [E(+G), ds]) of the env states."""
         if enc.oracle:
             obs = jax.vmap(lambda st: oracle_obs(env, st))(es)
-            rec = (obs, jax.vmap(lambda st: oracle_goal(env, st))(es), env.render(test0(es)))
+            video = env.render(test0(es)) if evaluate else None
+            rec = (obs, jax.vmap(lambda st: oracle_goal(env, st))(es), video)
             return rec, obs
         rgb = jax.vmap(env.render)(es)
         z = scene_latents(cfg, scene_params, rgb)
@@ -292,9 +308,12 @@ def collect_episode(cfg: TrainConfig, env, enc: GoalEncoder, frozen: Frozen, sta
         es, z, sac_s = carry
         k_pol, k_rand, k_upd = jax.random.split(k, 3)
         a_pol = sac.select_action(sac_s.policy_params, z, goals, k_pol, cfg=cfg.sac)
-        a_det = sac.select_action(eval_policy, z, goals, None, deterministic=True, cfg=cfg.sac)
         a_rand = jax.random.uniform(k_rand, a_pol.shape, minval=-1.0, maxval=1.0)
-        a = jnp.where(is_test, a_det, jnp.where(act_random, a_rand, a_pol))
+        a = jnp.where(act_random, a_rand, a_pol)
+        if evaluate:
+            a_det = sac.select_action(eval_policy, z, goals, None, deterministic=True,
+                                      cfg=cfg.sac)
+            a = jnp.where(is_test, a_det, a)
         es = jax.vmap(env.step)(es, a)
         rec, z = observe(es)
         sac_m = None
@@ -310,7 +329,7 @@ def collect_episode(cfg: TrainConfig, env, enc: GoalEncoder, frozen: Frozen, sta
         step, (env_state, z0, state.sac), jax.random.split(k_act, cfg.horizon))
     # Episode-major [.., T+1, ...] records of the training envs (and test env 0's video).
     rec = jax.tree.map(lambda x0, xs: jnp.concatenate([x0[None], xs], 0), rec0, recs)
-    test_final = jax.tree.map(lambda x: x[n_train:], env_state)
+    test_final = jax.tree.map(lambda x: x[n_train:], env_state) if evaluate else None
     env_state = jax.tree.map(lambda x: x[:n_train], env_state)
     goals = goals[:n_train]
     if enc.oracle:
@@ -320,7 +339,7 @@ def collect_episode(cfg: TrainConfig, env, enc: GoalEncoder, frozen: Frozen, sta
         goal_imgs, frame_lat = images, achieved
     else:
         rgbs, z = rec
-        video = rgbs[:, n_train]
+        video = rgbs[:, n_train] if evaluate else None
         images = rgbs[:, :n_train].swapaxes(0, 1)  # [E, T+1, H, W, 3]
         obs = z[:, :n_train].swapaxes(0, 1)
         goal_imgs = enc.goal_images(frozen, images)
@@ -334,10 +353,12 @@ def collect_episode(cfg: TrainConfig, env, enc: GoalEncoder, frozen: Frozen, sta
     else:
         log_p = jnp.zeros(images.shape[:2], jnp.float32)
     final_dist = jnp.sum(jnp.square(achieved[:, -1] - goals), -1)
-    metrics = {"rollout_latent_dist": final_dist.mean(),
-               "test_distances": jax.vmap(env.goal_distance)(test_final, test_states),
-               "test_start_distances": jax.vmap(env.goal_distance)(test_begin, test_states),
-               "test_video": video, "test_goal_image": test_rgb[0]}
+    metrics = {"rollout_latent_dist": final_dist.mean()}
+    if evaluate:
+        metrics.update({
+            "test_distances": jax.vmap(env.goal_distance)(test_final, test_states),
+            "test_start_distances": jax.vmap(env.goal_distance)(test_begin, test_states),
+            "test_video": video, "test_goal_image": test_rgb[0]})
     if interleave:
         metrics["sac_state"] = sac_state
         metrics["sac"] = jax.tree.map(jnp.mean, sac_ms)
@@ -399,18 +420,16 @@ def fresh_goals(enc: GoalEncoder, buffer: replay.ReplayBuffer, cdf, lstm_params,
                 prior=None):
     """n goals for exploration and for the fresh-goal share of HER relabeling.
 
-    ROLL (Algorithm 1): the object-VAE prior N(0, I) through the LSTM (`prior_goals`).
-    The oracle: object states of the task's goal space (`prior`, from `goal_bank`). With
-    cfg.prior_goals "buffer", ROLL's prior is N(mean, std) of the stored frame latents
-    (`prior`, from `frame_stats`).
+    ROLL (Algorithm 1): the object-VAE prior N(0, I) through the LSTM, drawn uniformly from
+    the chunk's bank of such goals (`prior`, from `goal_prior`; with cfg.prior_goals "buffer"
+    the prior is N(mean, std) of the stored frame latents). The oracle: object states of the
+    task's goal space (`prior`, from `goal_bank`).
     Skew-Fit (rlkit's `custom_goal_sampler`): achieved-goal latents of buffer frames drawn
     with probability p(x)^alpha (`cdf` from `skew_cdf`; the cached latents are refreshed with
     the VAE); the scene-VAE prior N(0, I) while the buffer is still empty.
     """
-    if enc.oracle:
-        return prior[jax.random.randint(key, (n,), 0, prior.shape[0])]
     if not enc.skewed_goals:
-        return enc.prior_goals(key, lstm_params, n, prior)
+        return prior[jax.random.randint(key, (n,), 0, prior.shape[0])]
     k_prior, k_buf = jax.random.split(key)
     flat = skewfit.sample_frames(k_buf, cdf, n)
     t1 = buffer.goal_latents.shape[1]
@@ -420,19 +439,24 @@ def fresh_goals(enc: GoalEncoder, buffer: replay.ReplayBuffer, cdf, lstm_params,
 
 # ----------------------------------------------------------------------------- the chunk
 
-def make_chunk(cfg: TrainConfig, env):
+def make_chunk(cfg: TrainConfig, env, evaluate: bool = True):
     """chunk(state, frozen, plan) -> (state, {"train": this chunk's training metrics, "eval":
     the evaluation of the policy the chunk started from, with "train" = the metrics of the
     chunk that trained it}) for ONE seed; the caller runs it over the seeds (frozen and plan
     un-batched; `compile_chunk`) and jits. The policy after the last chunk is evaluated by
-    one more chunk with `eval_only_plan()`."""
+    one more chunk with `eval_only_plan()`.
+
+    `evaluate` False: a chunk without the test envs and without "eval", for the chunks whose
+    evaluation nobody logs (the test envs would otherwise step beside the training envs in
+    every chunk); the training itself is the same."""
     enc = goal_encoder(cfg)
     n_updates = cfg.epoch_env_steps * cfg.sac.updates_per_step
 
     def chunk(state: TrainState, frozen: Frozen, plan: ChunkPlan):
         TRACE_COUNTS["chunk"] += 1
         key, k_col, k_sac, k_vae, k_lstm, k_bank = jax.random.split(state.key, 6)
-        prior = goal_prior(cfg, enc, env, state.buffer, k_bank)
+        prior = goal_prior(cfg, enc, env, state.buffer, k_bank,
+                           None if state.lstm is None else state.lstm.params)
 
         interleave = cfg.sac_schedule == "step"
         eval_policy = state.sac.policy_params
@@ -440,7 +464,7 @@ def make_chunk(cfg: TrainConfig, env):
         def episode(s, k_i):
             k, i = k_i
             es, traj, log_p, m = collect_episode(cfg, env, enc, frozen, s, k, plan.act_random,
-                                                 prior, plan.learn, eval_policy, i)
+                                                 prior, plan.learn, eval_policy, i, evaluate)
             if interleave:
                 s = s.replace(sac=m.pop("sac_state"))
             s = store_episodes(s, traj, log_p).replace(
@@ -451,12 +475,15 @@ def make_chunk(cfg: TrainConfig, env):
         state, col_m = jax.lax.scan(
             episode, state, (jax.random.split(k_col, cfg.episodes_per_epoch),
                              jnp.arange(cfg.episodes_per_epoch)))
-        dist = col_m.pop("test_distances").reshape(-1)  # [episodes * G]
-        start = col_m.pop("test_start_distances").reshape(-1)
-        evaluation = {"final_distance": dist.mean(), "final_distance_median": jnp.median(dist),
-                      "start_distance": start.mean(),
-                      "distances": dist, "video": col_m.pop("test_video")[0],
-                      "goal_image": col_m.pop("test_goal_image")[0], "train": start_train}
+        evaluation = None
+        if evaluate:
+            dist = col_m.pop("test_distances").reshape(-1)  # [episodes * G]
+            start = col_m.pop("test_start_distances").reshape(-1)
+            evaluation = {"final_distance": dist.mean(),
+                          "final_distance_median": jnp.median(dist),
+                          "start_distance": start.mean(),
+                          "distances": dist, "video": col_m.pop("test_video")[0],
+                          "goal_image": col_m.pop("test_goal_image")[0], "train": start_train}
         metrics = jax.tree.map(jnp.mean, col_m)
         if interleave:  # the updates ran inside the episodes
             metrics.update(metrics.pop("sac"))
@@ -487,16 +514,20 @@ def make_chunk(cfg: TrainConfig, env):
                                  lambda s: s, state)
         state = state.replace(key=key, epoch=state.epoch + 1, last_train={
             k: metrics[k].astype(jnp.float32) for k in train_metric_keys(cfg)})
-        return state, {"train": metrics, "eval": evaluation}
+        out = {"train": metrics}
+        if evaluate:
+            out["eval"] = evaluation
+        return state, out
 
     return chunk
 
 
-def compile_chunk(cfg: TrainConfig, env, n_devices: int = 1, seed_batch: int | None = None):
+def compile_chunk(cfg: TrainConfig, env, n_devices: int = 1, seed_batch: int | None = None,
+                  evaluate: bool = True):
     """jit of the chunk over the seed axis, state donated: vmapped over all seeds
     (`seed_batch` None), or each device's seeds in a lax.map over groups of `seed_batch`
-    vmapped seeds (`sharding.over_seeds`; faster on a CPU)."""
+    vmapped seeds (`sharding.over_seeds`; faster on a CPU). `evaluate`: `make_chunk`'s."""
     from roll_jax.sharding import over_seeds
 
-    chunk = over_seeds(make_chunk(cfg, env), cfg.seeds, n_devices, seed_batch)
+    chunk = over_seeds(make_chunk(cfg, env, evaluate), cfg.seeds, n_devices, seed_batch)
     return jax.jit(chunk, donate_argnums=0)

@@ -1,7 +1,8 @@
 """The training driver: segmentation -> pre-training -> chunks of the compiled loop.
 
-`run(cfg, out, ...)` is what `train.py` calls. Each chunk also evaluates the policy it starts
-from (test envs in the collection batch, `loop.collect_episode`); between chunks Python logs
+`run(cfg, out, ...)` is what `train.py` calls. Every `eval_every_epochs`-th chunk also
+evaluates the policy it starts from (test envs in the collection batch,
+`loop.collect_episode`; the other chunks run a program without them); between chunks Python logs
 metrics.csv, checkpoints (orbax, the whole train state including the replay buffer), plots the
 learning curve and drives the progress bar; at the end it writes timings.json (wall and CPU
 seconds per phase; the first chunk's include its compile). Seeds are the state's leading
@@ -11,6 +12,7 @@ sharded over them. A finished run gets `COMPLETE_MARKER` (complete.json), writte
 
 from __future__ import annotations
 
+import concurrent.futures
 import contextlib
 import dataclasses
 import json
@@ -162,6 +164,19 @@ def setup(cfg: TrainConfig, env, key, out: str, seg_ckpt=None, enc_ckpt=None, pr
     return frozen, pre
 
 
+def compile_in_background(fn, *args):
+    """A jitted `fn` lowered and compiled for the shapes and placements of `args` in another
+    thread -> a callable that waits for that compile on its first call. XLA compiles a
+    program on one core, so on a 2-core CPU a second program compiles while the first one
+    compiles or runs."""
+    abstract = jax.tree.map(
+        lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=x.sharding), args)
+    pool = concurrent.futures.ThreadPoolExecutor(1)
+    future = pool.submit(lambda: fn.lower(*abstract).compile())
+    pool.shutdown(wait=False)
+    return lambda *a: future.result()(*a)
+
+
 def init_seeds(cfg: TrainConfig, env, key, pre: pretrain.Pretrained,
                sharding: shd.SeedSharding | None = None) -> loop.TrainState:
     """[seeds]-batched train state; every seed starts from the same pre-trained encoders."""
@@ -235,9 +250,16 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
         # Rows of the chunks before the checkpoint; a finished run's final evaluation too.
         rows = run_dir.read_rows(csv_path, start_epoch * cfg.epoch_env_steps,
                          final=start_epoch == cfg.n_epochs)
-    chunk = loop.compile_chunk(cfg, env, n_devices, per_device)
+    # Two programs: chunks whose evaluation is logged run the test envs beside the training
+    # envs, the others leave them out. The second compiles in the background from the start.
+    chunks = {ev: loop.compile_chunk(cfg, env, n_devices, per_device, evaluate=ev)
+              for ev in (True, False)}
+    if cfg.eval_every_epochs > 1 and any(
+            e % cfg.eval_every_epochs for e in range(start_epoch, cfg.n_epochs)):
+        chunks[False] = compile_in_background(chunks[False], state, frozen,
+                                              loop.plan_chunk(cfg, start_epoch))
     if sharding is not None:
-        chunk = sharding.wrap_chunk(chunk)
+        chunks = {ev: sharding.wrap_chunk(c) for ev, c in chunks.items()}
 
     def log_evaluation(env_steps: int, ev: dict) -> None:
         """One metrics.csv row per seed: the evaluation of the policy after `env_steps` and
@@ -262,28 +284,29 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
     t_last, steps_last = time.perf_counter(), start_epoch * cfg.epoch_env_steps
     for epoch in bar:
         plan = loop.plan_chunk(cfg, epoch)
-        with times("chunks"):  # the first one includes tracing and compiling the chunk
-            state, metrics = chunk(state, frozen, plan)
+        evaluate = epoch % cfg.eval_every_epochs == 0
+        with times("chunks"):  # the first of each program includes tracing and compiling it
+            state, metrics = chunks[evaluate](state, frozen, plan)
             metrics = shd.to_host(metrics)
         env_steps = (epoch + 1) * cfg.epoch_env_steps
         check_finite(metrics["train"], env_steps, epoch, os.path.join(out, "ckpt"))
-        if epoch % cfg.eval_every_epochs == 0:
+        if evaluate:
             log_evaluation(epoch * cfg.epoch_env_steps, metrics["eval"])
-        if (epoch + 1) % cfg.eval_every_epochs == 0 or epoch + 1 == cfg.n_epochs:
-            save_train_state(mgr, epoch + 1, state)
             now = time.perf_counter()
             rate = (env_steps - steps_last) * cfg.seeds / max(now - t_last, 1e-9)
             t_last, steps_last = now, env_steps
             bar.set_postfix(dist=f"{np.median(metrics['eval']['final_distance']):.3f}",
                             start=f"{np.median(metrics['eval']['start_distance']):.3f}",
                             sps=f"{rate:.0f}")
+        if (epoch + 1) % cfg.checkpoint_every_epochs == 0 or epoch + 1 == cfg.n_epochs:
+            save_train_state(mgr, epoch + 1, state)
     mgr.wait_until_finished()  # the state is donated below: the checkpoint must be on disk
     evaluated = any(r["env_steps"] == cfg.total_env_steps for r in rows)  # resumed, finished
     if end_epoch == cfg.n_epochs and not evaluated:
         # The final policy: one more chunk that only collects (and evaluates); its state is
         # dropped, the checkpoint above is the run's end.
         with times("final_eval"):
-            _, metrics = chunk(state, frozen, loop.eval_only_plan())
+            _, metrics = chunks[True](state, frozen, loop.eval_only_plan())
             metrics = shd.to_host(metrics)
         log_evaluation(cfg.total_env_steps, metrics["eval"])
     mgr.wait_until_finished()

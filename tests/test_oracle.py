@@ -73,22 +73,33 @@ def test_oracle_goal_bank_lies_in_the_goal_space():
 def test_step_schedule_learns_during_collection_and_evaluates_the_start_policy(chunk_out):
     """sac_schedule "step": the updates run inside the episode (the SAC state after the chunk
     has them all), while the test envs act with the policy the chunk started from: their
-    distances equal those of the "epoch" schedule from the same state."""
+    distances equal those of the "epoch" schedule from the same state. A chunk without the
+    test envs (`evaluate` False) trains exactly as the one with them."""
     import dataclasses
 
     cfg, env, _, _ = chunk_out
     sac_cfg = dataclasses.replace(cfg.sac, learning_starts=0)
     pre = pretrain.initial(cfg, jax.random.PRNGKey(0))
     results = {}
-    for schedule in ("epoch", "step"):
+    for schedule, evaluate in (("epoch", True), ("step", True), ("step", False)):
         c = dataclasses.replace(cfg, sac=sac_cfg, sac_schedule=schedule)
         state = jax.jit(lambda k, c=c: loop.init_state(k, c, env, pre.scene_vae, pre.lstm))(
             jax.random.PRNGKey(1))
         plan = loop.plan_chunk(c, 0)
         assert bool(plan.learn) and not bool(plan.act_random)
-        new, m = jax.jit(loop.make_chunk(c, env))(state, Frozen(seg=None, object_vae=None), plan)
-        results[schedule] = (new, m)
-    (e_state, e_m), (s_state, s_m) = results["epoch"], results["step"]
+        new, m = jax.jit(loop.make_chunk(c, env, evaluate))(
+            state, Frozen(seg=None, object_vae=None), plan)
+        results[schedule, evaluate] = (new, m)
+    (e_state, e_m), (s_state, s_m) = results["epoch", True], results["step", True]
+    # Without the test envs the chunk trains the same: the same episodes, the same updates.
+    n_state, n_m = results["step", False]
+    assert "eval" not in n_m
+    np.testing.assert_array_equal(np.asarray(n_state.buffer.actions),
+                                  np.asarray(s_state.buffer.actions))
+    np.testing.assert_array_equal(np.asarray(n_state.buffer.obs_latents),
+                                  np.asarray(s_state.buffer.obs_latents))
+    for a, b in zip(jax.tree.leaves(n_state.sac), jax.tree.leaves(s_state.sac)):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-5, atol=1e-6)
     n_updates = cfg.epoch_env_steps * cfg.sac.updates_per_step
     assert int(e_state.sac.step) == int(s_state.sac.step) == n_updates
     np.testing.assert_allclose(np.asarray(s_m["eval"]["distances"]),

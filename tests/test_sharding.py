@@ -93,8 +93,8 @@ SCRIPT = textwrap.dedent("""
     seen = []
     compile_chunk = loop.compile_chunk
 
-    def recording(cfg, env, *placement):
-        chunk = compile_chunk(cfg, env, *placement)
+    def recording(cfg, env, *placement, **kw):
+        chunk = compile_chunk(cfg, env, *placement, **kw)
 
         def call(state, frozen, plan):
             leaves = [x for x in jax.tree.leaves(state) if x.size]

@@ -75,7 +75,7 @@ def test_skewed_goal_frequencies_match_weights():
 
 def test_fresh_goals_fall_back_to_prior_per_seed():
     """Under the seed vmap, an empty buffer (first episodes) gives N(0, I) goals and a filled
-    one gives buffer frames; ROLL's goals stay the prior whatever the buffer holds."""
+    one gives buffer frames; ROLL's goals come from its prior bank whatever the buffer holds."""
     log_p = jnp.zeros((CAP, T1))
     bufs = jax.tree.map(lambda a, b: jnp.stack([a, b]), _buffer(0), _buffer(2))
     cdfs = jax.vmap(lambda b: skewfit.skew_cdf(log_p, -1.0, b.size))(bufs)
@@ -85,8 +85,10 @@ def test_fresh_goals_fall_back_to_prior_per_seed():
     assert abs(empty.mean()) < 0.05 and abs(empty.std() - 1) < 0.05
     assert set(np.unique(filled[:, 0]).astype(int)) == set(range(2 * T1))  # uniform when log_p equal
     key = jax.random.PRNGKey(4)
-    np.testing.assert_array_equal(_fresh(PRIOR, _buffer(3), None, key, 8),
-                                  PRIOR.prior_goals(key, None, 8))
+    bank = loop.goal_prior(make_config("puck_push", "roll", "smoke"), PRIOR, None, _buffer(3),
+                           key)
+    np.testing.assert_array_equal(loop.fresh_goals(PRIOR, _buffer(3), None, None, key, 8, bank),
+                                  loop.fresh_goals(PRIOR, _buffer(0), None, None, key, 8, bank))
 
 
 def test_buffer_prior_matches_the_stored_frame_latents():
@@ -106,10 +108,22 @@ def test_buffer_prior_matches_the_stored_frame_latents():
     goals = np.asarray(PRIOR.prior_goals(jax.random.PRNGKey(0), None, 20000, (mean, std)))
     np.testing.assert_allclose(goals.mean(0), mean, atol=0.05)
     np.testing.assert_allclose(goals.std(0), std, rtol=0.03)
-    cfg = make_config("puck_push", "roll", "smoke", prior_goals="buffer")
-    assert loop.goal_prior(cfg, goal_encoder(cfg), None, buf, None) is not None
-    assert loop.goal_prior(make_config("puck_push", "roll", "smoke"), goal_encoder(cfg), None,
-                           buf, None) is None
+    # The chunk's bank of prior goals (no LSTM here: the goals are the prior samples).
+    key = jax.random.PRNGKey(1)
+    bank = np.asarray(loop.goal_prior(make_config("puck_push", "roll", "smoke",
+                                                  prior_goals="buffer"), PRIOR, None, buf, key))
+    assert bank.shape == (loop.PRIOR_BANK, DG)
+    np.testing.assert_allclose(bank.mean(0), mean, atol=0.15)
+    np.testing.assert_allclose(bank.std(0), std, rtol=0.05)
+    standard = np.asarray(loop.goal_prior(make_config("puck_push", "roll", "smoke"), PRIOR, None,
+                                          buf, key))
+    np.testing.assert_allclose(standard.mean(0), 0.0, atol=0.05)
+    np.testing.assert_allclose(standard.std(0), 1.0, rtol=0.05)
+    assert loop.goal_prior(make_config("puck_push", "skewfit", "smoke"), SKEWFIT, None, buf,
+                           key) is None
+    # Fresh goals for ROLL are rows of the bank.
+    fresh = np.asarray(loop.fresh_goals(PRIOR, buf, None, None, key, 64, jnp.asarray(bank)))
+    assert all((bank == row).all(1).any() for row in fresh)
     with pytest.raises(ValueError, match="unknown prior_goals 'data'"):
         make_config("puck_push", "roll", "smoke", prior_goals="data")
 
