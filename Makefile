@@ -14,7 +14,7 @@ $(STAMP): pyproject.toml
 # ROLL from pixels on puck_push at the cpu preset, cut to 30k env steps and 2 seeds so that the
 # whole job (segmentation, pretraining, training) fits about a quarter of an hour on 2 cores.
 train: $(STAMP)
-	$(VENV)/bin/python train.py --task puck_push --algo roll --preset cpu --seeds 2 --set total_env_steps=30000 n_eval_goals=16 --out runs/puck_push_roll_cpu
+	$(VENV)/bin/python train.py --task puck_push --algo roll --preset cpu --seeds 2 --set total_env_steps=30000 --out runs/puck_push_roll_cpu
 
 # Two workers, whole files per worker (module fixtures are built once): XLA compiles on one
 # core, so two files compile side by side on a 2-core machine. Files go out in the order
