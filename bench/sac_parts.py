@@ -1,0 +1,110 @@
+"""Where a SAC update's time goes at the cpu preset: the update alone (as bench/roofline.py
+times it, and with what it drops put back), HER sampling alone, and `loop.sac_steps` (sampling
++ update, as the chunk runs it).
+
+Sizes: the cpu preset's SAC (128-128, batch 256), 6-d latents, 2-d actions, a filled buffer of
+1000 episodes x 51 frames of random latents, ROLL's prior-goal bank (`loop.PRIOR_BANK`).
+Each variant runs --steps updates in one jitted `lax.scan`; best of 3 calls after a warm-up.
+
+    python bench/sac_parts.py [--steps 300] [--out bench/results/sac_parts.json]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+import jax  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
+
+from bench.common import cpu_model, write_results  # noqa: E402
+from configs.train import make_config  # noqa: E402
+from roll_jax import loop, replay, sac  # noqa: E402
+from roll_jax.goal_encoding import goal_encoder  # noqa: E402
+
+RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "sac_parts.json")
+
+
+def variants(steps: int):
+    """name -> (jitted fn, args): each runs `steps` updates (or samplings)."""
+    cfg = make_config("puck_push", "roll", "cpu")
+    scfg, enc = cfg.sac, goal_encoder(cfg)
+    b, n, t, d = scfg.batch_size, 1000, cfg.horizon, 6
+    ks = jax.random.split(jax.random.PRNGKey(0), 8)
+    state = sac.init_sac(ks[7], d, d, 2, scfg)
+    buf = replay.init_buffer(n, t, (1, 1, 3), 2, d, d, d)
+    buf = buf.replace(obs_latents=jax.random.normal(ks[0], buf.obs_latents.shape),
+                      goal_latents=jax.random.normal(ks[1], buf.goal_latents.shape),
+                      rollout_goals=jax.random.normal(ks[2], buf.rollout_goals.shape),
+                      actions=jax.random.uniform(ks[3], buf.actions.shape, minval=-1, maxval=1),
+                      size=jnp.int32(n))
+    bank = jax.random.normal(ks[4], (loop.PRIOR_BANK, d))
+    fixed = replay.sample_transitions(buf, ks[5], b, bank[:b], scfg.goal_fracs, cfg.reward_norm)
+
+    def constant_batch(s, k):
+        return jax.lax.scan(lambda s, k: (sac.sac_update(s, k, fixed, scfg)[0], None), s,
+                            jax.random.split(k, steps))[0]
+
+    def constant_batch_metrics(s, k):
+        return jax.lax.scan(lambda s, k: sac.sac_update(s, k, fixed, scfg), s,
+                            jax.random.split(k, steps))
+
+    def new_batch_metrics(s, k):
+        # Per-step batches the compiler cannot fold: the fixed batch plus 0 x noise.
+        noise = jax.random.normal(k, (steps,))
+        batches = jax.tree.map(
+            lambda x: x[None] + (0.0 * noise).reshape((steps,) + (1,) * x.ndim), fixed)
+        return jax.lax.scan(lambda s, xb: sac.sac_update(s, xb[0], xb[1], scfg), s,
+                            (jax.random.split(k, steps), batches))
+
+    def her_only(k):
+        def body(c, k):
+            k1, k2 = jax.random.split(k)
+            fresh = loop.fresh_goals(enc, buf, None, None, k1, b, bank)
+            x = replay.sample_transitions(buf, k2, b, fresh, scfg.goal_fracs, cfg.reward_norm)
+            return c + sum(jnp.sum(v) for v in jax.tree.leaves(x)), None
+        return jax.lax.scan(body, 0.0, jax.random.split(k, steps))[0]
+
+    def sac_steps(s, k):
+        return loop.sac_steps(cfg, enc, s, buf, None, None, k, steps, bank)
+
+    key = jax.random.PRNGKey(1)
+    return {
+        "update, constant batch, metrics dropped (roofline standalone)":
+            (constant_batch, (state, key)),
+        "update, constant batch, metrics kept": (constant_batch_metrics, (state, key)),
+        "update, new batch per update, metrics kept": (new_batch_metrics, (state, key)),
+        "HER sampling and relabeling alone": (her_only, (key,)),
+        "loop.sac_steps (sampling + update)": (sac_steps, (state, key)),
+    }
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--steps", type=int, default=300)
+    p.add_argument("--out", default=RESULTS)
+    a = p.parse_args(argv)
+    if a.steps <= 0:
+        p.error(f"--steps must be positive, got {a.steps}")
+    rows = []
+    for name, (fn, args) in variants(a.steps).items():
+        f = jax.jit(fn)
+        jax.block_until_ready(f(*args))
+        best = float("inf")
+        for _ in range(3):
+            t0 = time.perf_counter()
+            jax.block_until_ready(f(*args))
+            best = min(best, time.perf_counter() - t0)
+        ms = best / a.steps * 1e3
+        rows.append({"name": name, "ms_per_update": round(ms, 4)})
+        print(f"{name:64s} {ms:6.3f} ms per update", flush=True)
+    write_results(a.out, {"steps": a.steps, "jax_version": jax.__version__,
+                          "cpu_count": os.cpu_count(), "cpu_model": cpu_model(), "rows": rows})
+
+
+if __name__ == "__main__":
+    main()
