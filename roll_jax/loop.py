@@ -475,15 +475,15 @@ def make_chunk(cfg: TrainConfig, env, evaluate: bool = True):
         state, col_m = jax.lax.scan(
             episode, state, (jax.random.split(k_col, cfg.episodes_per_epoch),
                              jnp.arange(cfg.episodes_per_epoch)))
-        evaluation = None
+        out = {}
         if evaluate:
             dist = col_m.pop("test_distances").reshape(-1)  # [episodes * G]
             start = col_m.pop("test_start_distances").reshape(-1)
-            evaluation = {"final_distance": dist.mean(),
-                          "final_distance_median": jnp.median(dist),
-                          "start_distance": start.mean(),
-                          "distances": dist, "video": col_m.pop("test_video")[0],
-                          "goal_image": col_m.pop("test_goal_image")[0], "train": start_train}
+            out["eval"] = {"final_distance": dist.mean(),
+                           "final_distance_median": jnp.median(dist),
+                           "start_distance": start.mean(),
+                           "distances": dist, "video": col_m.pop("test_video")[0],
+                           "goal_image": col_m.pop("test_goal_image")[0], "train": start_train}
         metrics = jax.tree.map(jnp.mean, col_m)
         if interleave:  # the updates ran inside the episodes
             metrics.update(metrics.pop("sac"))
@@ -514,10 +514,7 @@ def make_chunk(cfg: TrainConfig, env, evaluate: bool = True):
                                  lambda s: s, state)
         state = state.replace(key=key, epoch=state.epoch + 1, last_train={
             k: metrics[k].astype(jnp.float32) for k in train_metric_keys(cfg)})
-        out = {"train": metrics}
-        if evaluate:
-            out["eval"] = evaluation
-        return state, out
+        return state, {"train": metrics, **out}
 
     return chunk
 
