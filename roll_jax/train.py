@@ -250,12 +250,13 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
         # Rows of the chunks before the checkpoint; a finished run's final evaluation too.
         rows = run_dir.read_rows(csv_path, start_epoch * cfg.epoch_env_steps,
                          final=start_epoch == cfg.n_epochs)
+    end_epoch = cfg.n_epochs if stop_after_epochs is None else min(cfg.n_epochs, stop_after_epochs)
     # Two programs: chunks whose evaluation is logged run the test envs beside the training
     # envs, the others leave them out. The second compiles in the background from the start.
     chunks = {ev: loop.compile_chunk(cfg, env, n_devices, per_device, evaluate=ev)
               for ev in (True, False)}
     if cfg.eval_every_epochs > 1 and any(
-            e % cfg.eval_every_epochs for e in range(start_epoch, cfg.n_epochs)):
+            e % cfg.eval_every_epochs for e in range(start_epoch, end_epoch)):
         chunks[False] = compile_in_background(chunks[False], state, frozen,
                                               loop.plan_chunk(cfg, start_epoch))
     if sharding is not None:
@@ -278,7 +279,6 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
             plots.learning_curve(rows, os.path.join(out, "plots", "learning_curve.png"),
                            f"{cfg.task} ({cfg.algo}, {cfg.seeds} seeds)")
 
-    end_epoch = cfg.n_epochs if stop_after_epochs is None else min(cfg.n_epochs, stop_after_epochs)
     bar = tqdm(range(start_epoch, end_epoch), desc=f"{cfg.task} {cfg.algo}", unit="epoch",
                disable=not (progress and main), initial=start_epoch, total=cfg.n_epochs)
     t_last, steps_last = time.perf_counter(), start_epoch * cfg.epoch_env_steps
