@@ -4,7 +4,8 @@ times it, and with what it drops put back), HER sampling alone, and `loop.sac_st
 
 Sizes: the cpu preset's SAC (128-128, batch 256), 6-d latents, 2-d actions, a filled buffer of
 1000 episodes x 51 frames of random latents, ROLL's prior-goal bank (`loop.PRIOR_BANK`).
-Each variant runs --steps updates in one jitted `lax.scan`; best of 3 calls after a warm-up.
+Each variant runs --steps updates in one jitted `lax.scan`; the best call after a warm-up
+(`bench.common.time_best`: at least 3 calls, more until 1 s was timed).
 
     python bench/sac_parts.py [--steps 300] [--out bench/results/sac_parts.json]
 """
@@ -13,14 +14,13 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import time
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 
-from bench.common import cpu_model, write_results  # noqa: E402
+from bench.common import cpu_model, time_best, write_results  # noqa: E402
 from configs.train import make_config  # noqa: E402
 from roll_jax import loop, replay, sac  # noqa: E402
 from roll_jax.goal_encoding import goal_encoder  # noqa: E402
@@ -63,13 +63,13 @@ def variants(steps: int):
     def her_only(k):
         def body(c, k):
             k1, k2 = jax.random.split(k)
-            fresh = loop.fresh_goals(enc, buf, None, None, k1, b, bank)
+            fresh = loop.fresh_goals(enc, buf, None, k1, b, bank)
             x = replay.sample_transitions(buf, k2, b, fresh, scfg.goal_fracs, cfg.reward_norm)
             return c + sum(jnp.sum(v) for v in jax.tree.leaves(x)), None
         return jax.lax.scan(body, 0.0, jax.random.split(k, steps))[0]
 
     def sac_steps(s, k):
-        return loop.sac_steps(cfg, enc, s, buf, None, None, k, steps, bank)
+        return loop.sac_steps(cfg, enc, s, buf, None, k, steps, bank)
 
     key = jax.random.PRNGKey(1)
     return {
@@ -92,13 +92,7 @@ def main(argv=None):
         p.error(f"--steps must be positive, got {a.steps}")
     rows = []
     for name, (fn, args) in variants(a.steps).items():
-        f = jax.jit(fn)
-        jax.block_until_ready(f(*args))
-        best = float("inf")
-        for _ in range(3):
-            t0 = time.perf_counter()
-            jax.block_until_ready(f(*args))
-            best = min(best, time.perf_counter() - t0)
+        _, best = time_best(jax.jit(fn), *args)
         ms = best / a.steps * 1e3
         rows.append({"name": name, "ms_per_update": round(ms, 4)})
         print(f"{name:64s} {ms:6.3f} ms per update", flush=True)

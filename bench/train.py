@@ -289,8 +289,7 @@ def part_functions(cfg, env, frozen):
         return jax.lax.scan(episode, None, (z_steps, goals, jax.random.split(key, n_ep)))[1]
 
     def prior_of(state, key):  # the chunk's prior-goal bank (loop.goal_prior)
-        return loop.goal_prior(cfg, enc, env, state.buffer, key,
-                               None if state.lstm is None else state.lstm.params)
+        return loop.goal_prior(cfg, enc, env, state.buffer, key, loop.lstm_params_of(state))
 
     def sac_one(state, key):
         k_bank, k = jax.random.split(key)
@@ -392,7 +391,7 @@ def bench_seeds(a, seeds: int, env) -> dict:
     template = jax.tree.map(lambda x: x[0, 0], state.env_state)
     parts["render"], rgb = _time_part("render", fns["render"], (template, poses), a.reps)
     parts["segment"], goal_imgs = _time_part("segment", fns["segment"], (frozen, rgb), a.reps)
-    lstm_params = state.lstm.params if state.lstm is not None else None
+    lstm_params = loop.lstm_params_of(state)
     parts["encoders"], _ = _time_part(
         "encoders", fns["encoders"],
         (frozen, state.scene_vae.params, lstm_params, rgb, goal_imgs, keys[1]), a.reps)

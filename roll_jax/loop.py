@@ -172,6 +172,11 @@ def oracle_goal(env, state):
     return (env.object_state(state) - oracle_centre(env)[3:]) / ORACLE_SCALE
 
 
+def lstm_params_of(state: TrainState):
+    """The LSTM's parameters of a train state (None without an LSTM)."""
+    return None if state.lstm is None else state.lstm.params
+
+
 def latent_dims(enc: GoalEncoder, env) -> tuple[int, int, int]:
     """(observation, goal, per-frame) latent sizes."""
     if enc.oracle:
@@ -271,12 +276,12 @@ def collect_episode(cfg: TrainConfig, env, enc: GoalEncoder, frozen: Frozen, sta
     k_test_reset, k_test = jax.random.split(jax.random.fold_in(state.eval_key, episode_index))
     interleave = cfg.sac_schedule == "step"
     eval_policy = state.sac.policy_params if eval_policy is None else eval_policy
-    lstm_params = None if state.lstm is None else state.lstm.params
+    lstm_params = lstm_params_of(state)
     scene_params = state.scene_vae.params
     n_train = cfg.n_envs
     reset_keys = jax.random.split(k_reset, n_train)
     cdf = _skew_cdf_of(cfg, enc, state)  # the buffer is fixed for the whole episode
-    goals = fresh_goals(enc, state.buffer, cdf, lstm_params, k_goal, n_train, prior)
+    goals = fresh_goals(enc, state.buffer, cdf, k_goal, n_train, prior)
     if evaluate:
         env_state = jax.vmap(env.reset_episode)(
             _concat(state.env_state, state.test_start),
@@ -319,7 +324,7 @@ def collect_episode(cfg: TrainConfig, env, enc: GoalEncoder, frozen: Frozen, sta
         sac_m = None
         if interleave:
             sac_s, sac_m = jax.lax.cond(
-                learn, lambda s_: sac_steps(cfg, enc, s_, state.buffer, cdf, lstm_params,
+                learn, lambda s_: sac_steps(cfg, enc, s_, state.buffer, cdf,
                                             k_upd, n_per_step, prior),
                 lambda s_: (s_, zero_sac), sac_s)
         return (es, z, sac_s), (rec, a, sac_m)
@@ -374,13 +379,13 @@ def store_episodes(state: TrainState, traj: replay.Trajectory, log_p) -> TrainSt
 
 
 def sac_steps(cfg: TrainConfig, enc: GoalEncoder, sac_state: sac.SACState,
-              buffer: replay.ReplayBuffer, cdf, lstm_params, key, n_updates: int, prior=None):
+              buffer: replay.ReplayBuffer, cdf, key, n_updates: int, prior=None):
     """`n_updates` SAC updates on HER batches from `buffer` -> (SAC state, mean metrics); the
     fresh-goal share is drawn per batch by `fresh_goals` (`cdf`: Skew-Fit's, or None)."""
 
     def body(s, k):
         k_goal, k_batch, k_upd = jax.random.split(k, 3)
-        fresh = fresh_goals(enc, buffer, cdf, lstm_params, k_goal, cfg.sac.batch_size, prior)
+        fresh = fresh_goals(enc, buffer, cdf, k_goal, cfg.sac.batch_size, prior)
         batch = replay.sample_transitions(buffer, k_batch, cfg.sac.batch_size, fresh,
                                           cfg.sac.goal_fracs, cfg.reward_norm)
         s, m = sac.sac_update(s, k_upd, batch, cfg.sac)
@@ -401,9 +406,8 @@ def sac_updates(cfg: TrainConfig, enc: GoalEncoder, state: TrainState, key, n_up
                 prior=None):
     """`sac_steps` on the train state's buffer (which does not change during the updates, so
     the Skew-Fit sampling CDF is built once)."""
-    lstm_params = None if state.lstm is None else state.lstm.params
     new, metrics = sac_steps(cfg, enc, state.sac, state.buffer, _skew_cdf_of(cfg, enc, state),
-                             lstm_params, key, n_updates, prior)
+                             key, n_updates, prior)
     return state.replace(sac=new), metrics
 
 
@@ -416,8 +420,7 @@ def zero_sac_metrics(cfg: TrainConfig, enc: GoalEncoder, state: TrainState, prio
     return m
 
 
-def fresh_goals(enc: GoalEncoder, buffer: replay.ReplayBuffer, cdf, lstm_params, key, n: int,
-                prior=None):
+def fresh_goals(enc: GoalEncoder, buffer: replay.ReplayBuffer, cdf, key, n: int, prior=None):
     """n goals for exploration and for the fresh-goal share of HER relabeling.
 
     ROLL (Algorithm 1): the object-VAE prior N(0, I) through the LSTM, drawn uniformly from
@@ -434,7 +437,8 @@ def fresh_goals(enc: GoalEncoder, buffer: replay.ReplayBuffer, cdf, lstm_params,
     flat = skewfit.sample_frames(k_buf, cdf, n)
     t1 = buffer.goal_latents.shape[1]
     replay_goals = buffer.goal_latents[flat // t1, flat % t1]
-    return jnp.where(buffer.size > 0, replay_goals, enc.prior_goals(k_prior, lstm_params, n))
+    # (Skew-Fit has no LSTM: its prior goals are the scene-VAE prior samples themselves.)
+    return jnp.where(buffer.size > 0, replay_goals, enc.prior_goals(k_prior, None, n))
 
 
 # ----------------------------------------------------------------------------- the chunk
@@ -455,8 +459,7 @@ def make_chunk(cfg: TrainConfig, env, evaluate: bool = True):
     def chunk(state: TrainState, frozen: Frozen, plan: ChunkPlan):
         TRACE_COUNTS["chunk"] += 1
         key, k_col, k_sac, k_vae, k_lstm, k_bank = jax.random.split(state.key, 6)
-        prior = goal_prior(cfg, enc, env, state.buffer, k_bank,
-                           None if state.lstm is None else state.lstm.params)
+        prior = goal_prior(cfg, enc, env, state.buffer, k_bank, lstm_params_of(state))
 
         interleave = cfg.sac_schedule == "step"
         eval_policy = state.sac.policy_params

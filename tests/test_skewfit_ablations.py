@@ -55,7 +55,7 @@ def test_skew_weights_match_numpy(alpha, size):
 
 @functools.partial(jax.jit, static_argnums=(0, 4))
 def _fresh(enc, buf, cdf, key, n):
-    return loop.fresh_goals(enc, buf, cdf, None, key, n)
+    return loop.fresh_goals(enc, buf, cdf, key, n)
 
 
 def test_skewed_goal_frequencies_match_weights():
@@ -79,7 +79,7 @@ def test_fresh_goals_fall_back_to_prior_per_seed():
     log_p = jnp.zeros((CAP, T1))
     bufs = jax.tree.map(lambda a, b: jnp.stack([a, b]), _buffer(0), _buffer(2))
     cdfs = jax.vmap(lambda b: skewfit.skew_cdf(log_p, -1.0, b.size))(bufs)
-    goals = np.asarray(jax.vmap(lambda b, c: loop.fresh_goals(SKEWFIT, b, c, None,
+    goals = np.asarray(jax.vmap(lambda b, c: loop.fresh_goals(SKEWFIT, b, c,
                                                               jax.random.PRNGKey(3), 4000))(bufs, cdfs))
     empty, filled = goals
     assert abs(empty.mean()) < 0.05 and abs(empty.std() - 1) < 0.05
@@ -87,8 +87,8 @@ def test_fresh_goals_fall_back_to_prior_per_seed():
     key = jax.random.PRNGKey(4)
     bank = loop.goal_prior(make_config("puck_push", "roll", "smoke"), PRIOR, None, _buffer(3),
                            key)
-    np.testing.assert_array_equal(loop.fresh_goals(PRIOR, _buffer(3), None, None, key, 8, bank),
-                                  loop.fresh_goals(PRIOR, _buffer(0), None, None, key, 8, bank))
+    np.testing.assert_array_equal(loop.fresh_goals(PRIOR, _buffer(3), None, key, 8, bank),
+                                  loop.fresh_goals(PRIOR, _buffer(0), None, key, 8, bank))
 
 
 def test_buffer_prior_matches_the_stored_frame_latents():
@@ -122,7 +122,7 @@ def test_buffer_prior_matches_the_stored_frame_latents():
     assert loop.goal_prior(make_config("puck_push", "skewfit", "smoke"), SKEWFIT, None, buf,
                            key) is None
     # Fresh goals for ROLL are rows of the bank.
-    fresh = np.asarray(loop.fresh_goals(PRIOR, buf, None, None, key, 64, jnp.asarray(bank)))
+    fresh = np.asarray(loop.fresh_goals(PRIOR, buf, None, key, 64, jnp.asarray(bank)))
     assert all((bank == row).all(1).any() for row in fresh)
     with pytest.raises(ValueError, match="unknown prior_goals 'data'"):
         make_config("puck_push", "roll", "smoke", prior_goals="data")
