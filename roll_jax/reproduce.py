@@ -28,6 +28,8 @@ import os
 import sys
 import time
 
+import numpy as np
+
 from configs.overrides import parse_overrides
 from configs.train import ALGOS, PRESETS, TASKS
 from roll_jax import plots, train
@@ -299,11 +301,27 @@ def read_metrics(path: str) -> list[dict]:
     return read_rows(path, 2**62)  # every row
 
 
+def seed_auc(rows: list[dict], key: str = METRIC) -> np.ndarray:
+    """Per seed, the area under its curve divided by the env steps it spans: the curve's
+    trapezoidal mean over training, in the metric's unit (a single evaluation: its value)."""
+    aucs = []
+    for seed in sorted({r["seed"] for r in rows}):
+        pts = sorted((r["env_steps"], r[key]) for r in rows if r["seed"] == seed)
+        s, v = np.asarray(pts, dtype=np.float64).T
+        aucs.append(v[0] if len(s) == 1 else
+                    float(np.sum((v[1:] + v[:-1]) / 2 * np.diff(s)) / (s[-1] - s[0])))
+    return np.asarray(aucs)
+
+
 def final_stats(rows: list[dict], key: str = METRIC) -> dict:
-    """median / 25th / 75th percentile over seeds at the last evaluated env step."""
+    """median / 25th / 75th percentile over seeds at the last evaluated env step, and of the
+    seeds' areas under the curve (`seed_auc`)."""
     steps, med, lo, hi = plots.seed_quantiles(rows, key)
+    auc = seed_auc(rows, key)
     return {"env_steps": int(steps[-1]), "seeds": sum(int(r["env_steps"] == steps[-1]) for r in rows),
-            "median": float(med[-1]), "q25": float(lo[-1]), "q75": float(hi[-1])}
+            "median": float(med[-1]), "q25": float(lo[-1]), "q75": float(hi[-1]),
+            "auc_median": float(np.median(auc)), "auc_q25": float(np.percentile(auc, 25)),
+            "auc_q75": float(np.percentile(auc, 75))}
 
 
 def _panels(n: int):
@@ -345,22 +363,29 @@ def ablation_figure(by_variant: dict[str, list[dict]], path: str) -> None:
     plt.close(fig)
 
 
-TABLE_FIELDS = ("task", "algo", "env_steps", "seeds", "median", "q25", "q75", "complete")
+TABLE_FIELDS = ("task", "algo", "env_steps", "seeds", "median", "q25", "q75", "auc_median",
+                "auc_q25", "auc_q75", "complete")
 
 
 def results_table(entries: list[dict], out: str) -> None:
-    """DIR/results.csv and DIR/results.md: final distance per task / algorithm."""
+    """DIR/results.csv and DIR/results.md: final distance and area under the curve per task /
+    algorithm."""
     with open(os.path.join(out, "results.csv"), "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=TABLE_FIELDS)
         w.writeheader()
         w.writerows(entries)
     lines = [f"# Final distance to goal ({METRIC}, lower is better)", "",
-             "Median and 25th-75th percentile over seeds at the last evaluation of each run.", "",
-             "| task | algorithm | env steps | seeds | median | 25% | 75% | complete |",
-             "|---|---|---|---|---|---|---|---|"]
+             "Median and 25th-75th percentile over seeds at the last evaluation of each run; "
+             "area under the curve: per seed, the curve's trapezoidal mean over the env steps "
+             "it spans (same unit; lower is better), median and 25th-75th percentile over seeds.",
+             "",
+             "| task | algorithm | env steps | seeds | median | 25% | 75% | AUC median | AUC 25% "
+             "| AUC 75% | complete |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for e in entries:
         lines.append(f"| {e['task']} | {LABELS.get(e['algo'], e['algo'])} | {e['env_steps']} | "
                      f"{e['seeds']} | {e['median']:.4f} | {e['q25']:.4f} | {e['q75']:.4f} | "
+                     f"{e['auc_median']:.4f} | {e['auc_q25']:.4f} | {e['auc_q75']:.4f} | "
                      f"{'yes' if e['complete'] else 'no'} |")
     with open(os.path.join(out, "results.md"), "w") as f:
         f.write("\n".join(lines) + "\n")

@@ -178,8 +178,14 @@ def test_figures_and_table_from_metrics(tmp_path):
     r = rows[("hurdle_top", "roll_no_lstm")]
     assert (float(r["median"]), float(r["q25"]), float(r["q75"])) == (1.0, 1.0, 2.0)
     md = (out / "results.md").read_text()
-    assert "| puck_push | ROLL | 1000 | 4 | 0.2500 | 0.1750 | 0.3250 | yes |" in md
-    assert "| hurdle_top | ROLL, no LSTM | 1000 | 4 | 1.0000 | 1.0000 | 2.0000 | no |" in md
+    # Areas under the curve per seed: (0.4 + 0.4) / 2, (0.3 + 0.1) / 2, ... over 500 steps.
+    r = rows[("puck_push", "roll")]
+    assert [float(r[c]) for c in ("auc_median", "auc_q25", "auc_q75")] == pytest.approx(
+        [0.2, 0.2, 0.25])
+    assert ("| puck_push | ROLL | 1000 | 4 | 0.2500 | 0.1750 | 0.3250 | 0.2000 | 0.2000 | "
+            "0.2500 | yes |") in md
+    assert ("| hurdle_top | ROLL, no LSTM | 1000 | 4 | 1.0000 | 1.0000 | 2.0000 | 1.0000 | "
+            "1.0000 | 2.0000 | no |") in md
 
 
 def test_dry_run_trains_nothing(tmp_path, capsys):
