@@ -75,6 +75,11 @@ class TrainConfig:
     n_eval_goals: int = 32  # test goals per evaluation (per seed)
     skew_alpha: float = -1.0  # Table 2: Skew-Fit alpha for the scene-VAE
     skew_num_latents: int = 10  # rlkit Skew-Fit priority: importance samples per image
+    # Skew-Fit samples its scene-VAE batches and its goals uniformly from the buffer until this
+    # epoch and p(x)^alpha after it: the reference code's replay_buffer_kwargs
+    # start_skew_epoch=10 in every Skew-Fit launch file (rlkit examples/skewfit; ROLL's
+    # examples/skewfit), read as OnlineVaeRelabelingBuffer's `skew = epoch > start_skew_epoch`.
+    skew_start_epoch: int = 10
     vae_schedule: str = "custom_schedule_2"  # Skew-Fit appendix C.5 (rlkit vae_schedules)
     vae_online_batch: int = 64  # Table 3: scene-VAE batch size
     # Scene-VAE pretraining images: "random_policy" ("Training schedules": a random policy's
@@ -127,6 +132,8 @@ class TrainConfig:
             raise ValueError(
                 f"TrainConfig.epoch_env_steps={self.epoch_env_steps} must be a multiple of "
                 f"n_envs * horizon = {self.n_envs} * {self.horizon}: a chunk runs whole episodes")
+        if self.skew_start_epoch < 0:
+            raise ValueError(f"TrainConfig.skew_start_epoch must be >= 0, got {self.skew_start_epoch}")
         if self.total_env_steps % self.epoch_env_steps:
             raise ValueError(f"TrainConfig.total_env_steps={self.total_env_steps} must be a "
                              f"multiple of epoch_env_steps={self.epoch_env_steps}")

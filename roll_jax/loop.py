@@ -399,7 +399,7 @@ def sac_steps(cfg: TrainConfig, enc: GoalEncoder, sac_state: sac.SACState,
 def _skew_cdf_of(cfg: TrainConfig, enc: GoalEncoder, state: TrainState):
     if not enc.skewed_goals:
         return None
-    return skewfit.skew_cdf(state.skew_log_p, cfg.skew_alpha, state.buffer.size)
+    return skewfit.skew_cdf_at(cfg, state.skew_log_p, state.buffer.size, state.epoch)
 
 
 def sac_updates(cfg: TrainConfig, enc: GoalEncoder, state: TrainState, key, n_updates: int,

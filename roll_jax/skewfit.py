@@ -79,6 +79,14 @@ def skew_cdf(log_p, alpha: float, size):
     return weights_cdf(skew_weights(log_p, alpha, filled_frames(log_p, size)), size)
 
 
+def skew_cdf_at(cfg: TrainConfig, log_p, size, epoch):
+    """`skew_cdf` of epoch `epoch` (traced int): uniform over the filled frames (alpha 0) up to
+    cfg.skew_start_epoch, p(x)^cfg.skew_alpha after it (rlkit's start_skew_epoch). While the
+    buffer is small and the VAE young, alpha -1 would put most weight on a few frames."""
+    alpha = jnp.where(epoch > cfg.skew_start_epoch, cfg.skew_alpha, 0.0)
+    return skew_cdf(log_p, alpha, size)
+
+
 def sample_frames(key, cdf, n: int):
     """n flat frame indices drawn with probability cdf[i] - cdf[i-1] (inverse CDF)."""
     u = jax.random.uniform(key, (n,)) * cdf[-1]

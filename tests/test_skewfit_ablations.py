@@ -53,6 +53,27 @@ def test_skew_weights_match_numpy(alpha, size):
     np.testing.assert_allclose(cdf, np.cumsum(w), rtol=1e-5, atol=1e-7)
 
 
+def test_skewing_starts_after_skew_start_epoch():
+    """rlkit's start_skew_epoch: uniform over the filled frames up to that epoch (the goals and
+    the online scene-VAE batches both draw from this CDF), p(x)^alpha after it."""
+    cfg = make_config("puck_push", "skewfit", "smoke", skew_start_epoch=3)
+    assert make_config("puck_push", "skewfit", "paper").skew_start_epoch == 10
+    log_p = jnp.asarray(np.random.default_rng(2).normal(-50.0, 3.0, (CAP, T1)), jnp.float32)
+    at = jax.jit(lambda e: skewfit.skew_cdf_at(cfg, log_p, 3, e))
+    uniform = np.cumsum(_np_weights(np.zeros((CAP, T1)), -1.0, 3))
+    for epoch in (0, 3):
+        np.testing.assert_allclose(at(jnp.int32(epoch)), uniform, rtol=1e-6)
+    np.testing.assert_allclose(at(jnp.int32(4)), skewfit.skew_cdf(log_p, cfg.skew_alpha, 3),
+                               rtol=1e-6)
+    assert np.abs(np.asarray(at(jnp.int32(4))) - uniform).max() > 0.1  # the skew is visible
+    state = loop.TrainState(sac=None, scene_vae=None, lstm=None, buffer=_buffer(3),
+                            skew_log_p=log_p, env_state=None, test_start=None, last_train={},
+                            key=None, env_steps=None, epoch=jnp.int32(2), eval_key=None)
+    np.testing.assert_allclose(loop._skew_cdf_of(cfg, SKEWFIT, state), uniform, rtol=1e-6)
+    with pytest.raises(ValueError, match="skew_start_epoch must be >= 0, got -1"):
+        make_config("puck_push", "skewfit", "smoke", skew_start_epoch=-1)
+
+
 @functools.partial(jax.jit, static_argnums=(0, 4))
 def _fresh(enc, buf, cdf, key, n):
     return loop.fresh_goals(enc, buf, cdf, key, n)
@@ -334,7 +355,7 @@ def test_online_scene_vae_round_recomputes_log_p_of_the_filled_episodes_only():
     state = loop.TrainState(sac=None, scene_vae=vae, lstm=None, buffer=buf,
                             skew_log_p=jnp.full((cap, t + 1), -5.0), env_state=None,
                             test_start=None, last_train={}, key=None, env_steps=None,
-                            epoch=None, eval_key=None)
+                            epoch=jnp.int32(1), eval_key=None)
     key = jax.random.PRNGKey(2)
     new, _ = jax.jit(lambda s: online_training.train_scene_vae(cfg, s, key, 2))(state)
     keys = jax.random.split(jax.random.split(key)[0], cap)  # train_scene_vae's k_lp
