@@ -1,4 +1,5 @@
-"""Paired comparison of two finished runs with the same base seed, task and seed count.
+"""Paired comparison of two runs with the same base seed, task and seed count (finished, or
+with --partial one still running or cut off: compared up to the last evaluation both have).
 
     python bench/paired.py --a runs/learning_roll_cpu --b runs/learning_roll_cpu_sq \
         --name reward_form_roll_cpu --from-steps 10000
@@ -75,19 +76,26 @@ def main(argv=None) -> dict:
     p.add_argument("--from-steps", type=int, default=0)
     p.add_argument("--to-steps", type=int, default=None,
                    help="compare evaluations up to this env step only")
+    p.add_argument("--partial", action="store_true",
+                   help="accept an unfinished run; compare up to the last evaluation both have")
     a = p.parse_args(argv)
     from roll_jax import run_dir, train
 
     runs = []
     for d in (a.a, a.b):
-        if not train.is_complete(d):
-            raise SystemExit(f"{d}: not a finished run (no {run_dir.COMPLETE_MARKER})")
+        if not (a.partial or train.is_complete(d)):
+            raise SystemExit(f"{d}: not a finished run (no {run_dir.COMPLETE_MARKER}); "
+                             "--partial compares what it has")
         runs.append((run_dir.read_config(d),
                      run_dir.read_rows(os.path.join(d, "metrics.csv"), 2**62, True)))
     (ca, rows_a), (cb, rows_b) = runs
+    if a.partial:
+        last = min(max(r["env_steps"] for r in rows) for rows in (rows_a, rows_b))
+        a.to_steps = last if a.to_steps is None else min(a.to_steps, last)
     if (ca.task, ca.seeds) != (cb.task, cb.seeds):
         raise SystemExit(f"task/seeds differ: {ca.task}/{ca.seeds} vs {cb.task}/{cb.seeds}")
     out = {"name": a.name, "a": a.a, "b": a.b, "task": ca.task, "seeds": ca.seeds,
+           "complete": {"a": train.is_complete(a.a), "b": train.is_complete(a.b)},
            "command": "python bench/paired.py " + " ".join(argv if argv is not None
                                                            else sys.argv[1:]),
            **compare(rows_a, rows_b, a.from_steps, a.to_steps)}
