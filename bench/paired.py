@@ -81,24 +81,26 @@ def main(argv=None) -> dict:
     a = p.parse_args(argv)
     from roll_jax import run_dir, train
 
-    runs = []
-    for d in (a.a, a.b):
-        if not (a.partial or train.is_complete(d)):
+    runs, complete = [], {}
+    for name, d in (("a", a.a), ("b", a.b)):
+        complete[name] = train.is_complete(d)
+        if not (a.partial or complete[name]):
             raise SystemExit(f"{d}: not a finished run (no {run_dir.COMPLETE_MARKER}); "
                              "--partial compares what it has")
         runs.append((run_dir.read_config(d),
                      run_dir.read_rows(os.path.join(d, "metrics.csv"), 2**62, True)))
     (ca, rows_a), (cb, rows_b) = runs
+    to_steps = a.to_steps
     if a.partial:
         last = min(max(r["env_steps"] for r in rows) for rows in (rows_a, rows_b))
-        a.to_steps = last if a.to_steps is None else min(a.to_steps, last)
+        to_steps = last if to_steps is None else min(to_steps, last)
     if (ca.task, ca.seeds) != (cb.task, cb.seeds):
         raise SystemExit(f"task/seeds differ: {ca.task}/{ca.seeds} vs {cb.task}/{cb.seeds}")
     out = {"name": a.name, "a": a.a, "b": a.b, "task": ca.task, "seeds": ca.seeds,
-           "complete": {"a": train.is_complete(a.a), "b": train.is_complete(a.b)},
+           "complete": complete,
            "command": "python bench/paired.py " + " ".join(argv if argv is not None
                                                            else sys.argv[1:]),
-           **compare(rows_a, rows_b, a.from_steps, a.to_steps)}
+           **compare(rows_a, rows_b, a.from_steps, to_steps)}
     path = os.path.join(ROOT, "bench", "results", f"paired_{a.name}.json")
     with open(path, "w") as f:
         json.dump(out, f, indent=2)

@@ -128,7 +128,7 @@ SMOKE = Preset("smoke", "the whole path in minutes (tests); learns nothing", {
     # Two chunks (3 evaluations: 0, 500, 1000 env steps).
     "train": {"total_env_steps": 1000, "epoch_env_steps": 500, "eval_every_epochs": 1,
               "checkpoint_every_epochs": 1, "n_eval_goals": 4, "vae_schedule": "smoke",
-              # skewed Skew-Fit sampling from the second chunk on (paper: after epoch 10)
+              # skewed Skew-Fit sampling from the second chunk on (reference code: after epoch 10)
               "skew_num_latents": 2, "skew_start_epoch": 0},
     "sac": {"hidden": (32, 32), "batch_size": 64, "replay_size": 2_000, "learning_starts": 200},
     # 50 VAE pre-training steps on batches of 32.

@@ -15,8 +15,9 @@ from roll_jax.goal_encoding import Frozen, GoalEncoder
 
 def train_scene_vae(cfg: TrainConfig, state, key, n_batches):
     """`n_batches` scene-VAE steps on replay images drawn with Skew-Fit weights (from the
-    stored log p(x) under the current VAE; uniform until cfg.skew_start_epoch), then log p(x) of the buffer's filled episodes
-    under the trained VAE (rlkit recomputes its priorities after training too)."""
+    stored log p(x) under the current VAE; uniform until cfg.skew_start_epoch), then log p(x)
+    of the buffer's filled episodes under the trained VAE (rlkit recomputes its priorities
+    after training too)."""
     buf = state.buffer
     k_lp, k_train = jax.random.split(key)
     cdf = skewfit.skew_cdf_at(cfg, state.skew_log_p, buf.size, state.epoch)
