@@ -11,14 +11,18 @@ segmentation and pre-training compiles.
 Not bit-exact: XLA:CPU's 2-device program computes one MJX `env.step` within a float32 ulp of
 the 1-device one (`env.reset` and SAC updates alone are exact; `shard_map` instead of jit
 shardings differs the same way), and 100 steps of training amplify that to <1e-2 relative in
-the metrics, a few percent in some parameters and a few flipped replay pixels. The tolerances
-below are 4-8x what that gives and far below what a sharding bug gives (another seed's key or
-state: O(1) differences). 2 seeds per device, not 1: a vmapped convolution of batch 1
-compiles to another kernel (more roundoff, same story).
+the metrics and a few flipped replay pixels. Single parameter leaves can differ far more: Adam
+moves a weight whose gradient is near zero by about lr * sign(gradient), so a rounding flip of
+that sign moves a near-zero bias by a large fraction of its norm (measured up to 48% on one
+CPU, 2% on another). So the final state is compared per part (policy, critics, each optimiser
+state, each replay field, ...) against the distance to the nearest other seed's part, which is
+what a sharding bug (another seed's key or rows) gives. 2 seeds per device, not 1: a vmapped
+convolution of batch 1 compiles to another kernel (more roundoff, same story).
 """
 
 import json
 import os
+import re
 import subprocess
 import sys
 import textwrap
@@ -194,17 +198,31 @@ def test_sharded_equals_unsharded(two_device_runs):
     assert len(set(finals)) == len(finals)  # the seeds differ (a swap would show above)
     sa, sb = np.load(base / "sharded.npz"), np.load(base / "single.npz")
     assert sorted(sa.files) == sorted(sb.files)
+    groups = {}
     for k in sa.files:
         x, y = sa[k], sb[k]
         assert x.shape == y.shape and x.dtype == y.dtype, k
         if x.dtype.kind != "f":  # replay images, indices, counters
             assert np.mean(x != y) <= 1e-4, k
             continue
-        path = report["leaf_paths"][int(k)]
-        for s in range(x.shape[0]):
-            diff = np.linalg.norm(x[s].astype(np.float64) - y[s])
-            # Relative, with an absolute floor for leaves near zero (biases that started at 0).
-            assert diff <= 0.25 * np.linalg.norm(y[s].astype(np.float64)) + 1e-2, (path, s)
+        groups.setdefault(_group(report["leaf_paths"][int(k)]), []).append(k)
+    n_seeds = len(finals)
+    for name, keys in groups.items():
+        x = np.stack([np.concatenate([sa[k][s].ravel() for k in keys]) for s in range(n_seeds)])
+        y = np.stack([np.concatenate([sb[k][s].ravel() for k in keys]) for s in range(n_seeds)])
+        x, y = x.astype(np.float64), y.astype(np.float64)
+        for s in range(n_seeds):
+            diff, norm = np.linalg.norm(x[s] - y[s]), np.linalg.norm(y[s])
+            # How far this seed's state is from the nearest other seed's: what a sharding bug
+            # (another seed's key or rows) would give. The relative floor covers parts that
+            # all seeds share (the pre-trained LSTM, goal latents).
+            between = min(np.linalg.norm(y[s] - y[t]) for t in range(n_seeds) if t != s)
+            assert diff <= 0.25 * between + 1e-3 * norm, (name, s, diff, between, norm)
+
+
+def _group(path):
+    """'.sac.policy_params[...]' -> '.sac.policy_params'; '.buffer.actions' stays."""
+    return re.match(r"(\.\w+)(\.\w+|\[\d+\])?", path).group(0)
 
 
 def test_resume_on_other_device_count(two_device_runs):
