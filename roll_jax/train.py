@@ -233,8 +233,10 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
                         pretrain_cache)
     with times("init"):
         state = jax.block_until_ready(init_seeds(cfg, env, k_init, pre, sharding))
-    if sharding is not None:
-        frozen = sharding.replicate(frozen)
+    # Committed like the state: fresh (uncommitted) and restored (committed) parameters would
+    # otherwise compile two programs for one config, and miss each other's cache entries.
+    frozen = jax.device_put(frozen, jax.devices()[0]) if sharding is None else (
+        sharding.replicate(frozen))
     mgr = train_state_manager(out, cfg.keep_checkpoints)
     rows: list[dict] = []
     csv_path = os.path.join(out, "metrics.csv")
