@@ -4,7 +4,8 @@ of the matmul rate measured in the same process.
 1. matmul: a 2048 x 2048 float32 `jnp.dot` (2 * 2048^3 FLOPs), the machine's reference rate;
 2. scene-VAE train step (batch 64, Table 3) and object-VAE train step (batch 128, matching
    loss on occluded copies), each with the convolutions of roll_jax/conv.py ("matmul", the
-   default) and with XLA's ("lax"), side by side;
+   default; "matmul_patches", every transposed conv in the patch form) and with XLA's
+   ("lax"), side by side, each batch drawn from a pool as in training;
 3. U-Net train step (the cpu preset's width 8 and the paper preset's 16 at batch 32) with the
    kernel gradient as dots (`dot_wgrad`, the CPU default) and with XLA's, and inference;
 4. SAC update standalone on a fixed batch: the cpu preset's 128-128 at batch 256, the paper's
@@ -29,8 +30,9 @@ BatchNorm, Adam and the losses are not counted):
   gradient: 3P + 4Q): 4P + 12Q MACs, P and Q the MLPs' MACs per sample.
 
     python bench/roofline.py [--chunk] [--quick]
+    python bench/roofline.py --ab ROUNDS   (the two matmul forms only, interleaved)
 
-Writes bench/results/roofline.json.
+Writes bench/results/roofline.json (--ab: bench/results/conv_forms.json).
 """
 from __future__ import annotations
 
@@ -61,6 +63,7 @@ from roll_jax.models import _CONV, _DECONV, _FEATURE_MAP, IMAGE_SHAPE
 from roll_jax.segmentation import unet
 
 RESULTS = os.path.join(ROOT, "bench", "results", "roofline.json")
+AB_RESULTS = os.path.join(ROOT, "bench", "results", "conv_forms.json")
 TASK = "puck_push"
 
 
@@ -120,7 +123,7 @@ def sac_update_flops(obs: int, goal: int, act: int, hidden, batch: int) -> float
 def bench_matmul(n: int = 2048) -> dict:
     a = jax.random.normal(jax.random.PRNGKey(0), (n, n))
     b = jax.random.normal(jax.random.PRNGKey(1), (n, n))
-    _, best = time_best(jax.jit(jnp.dot), a, b, repeats=5)
+    _, best = time_best(jax.jit(jnp.dot), a, b, repeats=10, min_time=3.0)
     rate = 2 * n ** 3 / best / 1e9
     print(f"  matmul {n}x{n} float32: {1e3 * best:.1f} ms, {rate:.1f} GFLOP/s", flush=True)
     return {"n": n, "ms": 1e3 * best, "gflop_per_s": rate}
@@ -136,29 +139,39 @@ def _vae_images(key, batch: int, object_like: bool):
     return jnp.broadcast_to(img, mask.shape + (3,)), mask
 
 
-def bench_vae(cfg, steps: int, peak: float, name: str) -> dict:
+def vae_step_timer(cfg, steps: int):
+    """A function that times `steps` VAE train steps in one jitted `lax.scan` (each batch drawn
+    from a pool of 4 batches, as `encoders.vae_fit_epoch` does, so nothing is constant-folded)
+    and returns (first call s, best s per call)."""
     key = jax.random.PRNGKey(0)
-    images, masks = _vae_images(key, cfg.batch_size, cfg.matching_coef > 0)
+    pool, pool_masks = _vae_images(key, 4 * cfg.batch_size, cfg.matching_coef > 0)
+    state = encoders.init_vae(key, cfg)
+
+    @jax.jit
+    def run(state, key):
+        def body(st, k):
+            k_idx, k_step = jax.random.split(k)
+            idx = jax.random.randint(k_idx, (cfg.batch_size,), 0, pool.shape[0])
+            masks = None if pool_masks is None else pool_masks[idx]
+            return encoders.vae_train_step(st, k_step, pool[idx], cfg, masks)[0], None
+        return jax.lax.scan(body, state, jax.random.split(key, steps))[0]
+
+    return lambda: time_best(run, state, key)
+
+
+def bench_vae(cfg, steps: int, peak: float, name: str) -> dict:
     macs = vae_macs(cfg.latent_dim, cfg.feature_dim)
     per_image = 3 * (macs["encoder"] + macs["decoder"])
     if cfg.matching_coef > 0:
         per_image += 3 * macs["encoder"]
     flops = 2.0 * per_image * cfg.batch_size
     out = {}
-    for impl in ("matmul", "lax"):
-        c = dataclasses.replace(cfg, conv_impl=impl)
-        state = encoders.init_vae(key, c)
-
-        @jax.jit
-        def run(state, key, c=c):
-            def body(st, k):
-                return encoders.vae_train_step(st, k, images, c, masks)[0], None
-            return jax.lax.scan(body, state, jax.random.split(key, steps))[0]
-
-        first, best = time_best(run, state, key)
+    for impl in ("matmul", "matmul_patches", "lax"):
+        first, best = vae_step_timer(dataclasses.replace(cfg, conv_impl=impl), steps)()
         out[impl] = _row(f"{name} train step ({impl})", best / steps, flops, peak,
                          batch=cfg.batch_size, compile_and_first_call_s=first)
     out["speedup_matmul_over_lax"] = out["lax"]["ms"] / out["matmul"]["ms"]
+    out["speedup_matmul_over_patches"] = out["matmul_patches"]["ms"] / out["matmul"]["ms"]
     return out
 
 
@@ -235,15 +248,46 @@ def bench_sac_in_chunk() -> dict:
     return bt.sac_share_in_chunk(TASK, "cpu")
 
 
+def conv_forms_ab(steps: int, rounds: int) -> dict:
+    """The VAE train steps with the default convolutions ("matmul") against the patch form in
+    every layer ("matmul_patches"), alternating in `rounds` rounds (order flipped every other
+    round) in one process: this machine's speed drifts by ~10% over minutes, more than the
+    difference measured."""
+    out = {}
+    for name, cfg in (("scene_vae", scene_vae_config(TASK)), ("object_vae", object_vae_config(TASK))):
+        timers = {impl: vae_step_timer(dataclasses.replace(cfg, conv_impl=impl), steps)
+                  for impl in ("matmul", "matmul_patches")}
+        ms = {impl: [] for impl in timers}
+        for r in range(rounds):
+            for impl in (list(timers) if r % 2 == 0 else list(timers)[::-1]):
+                ms[impl].append(1e3 * timers[impl]()[1] / steps)
+        med = {impl: statistics.median(v) for impl, v in ms.items()}
+        out[name] = {"ms_per_round": ms, "median_ms": med,
+                     "patches_over_matmul": med["matmul_patches"] / med["matmul"]}
+        print(f"  {name}: matmul {med['matmul']:.2f} ms, matmul_patches "
+              f"{med['matmul_patches']:.2f} ms (median of {rounds} interleaved rounds)", flush=True)
+    return out
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--chunk", action="store_true",
                    help="also time SAC inside the cpu-preset chunk (compiles the chunk: minutes)")
     p.add_argument("--quick", action="store_true", help="fewer steps per call")
-    p.add_argument("--out", default=RESULTS)
+    p.add_argument("--ab", type=int, metavar="ROUNDS", default=0,
+                   help="only the VAE steps' two matmul forms, interleaved in ROUNDS rounds "
+                        "(writes bench/results/conv_forms.json)")
+    p.add_argument("--out", default=None)
     a = p.parse_args(argv)
     steps = 5 if a.quick else 20
+    if a.ab:
+        res = {"cpu_count": os.cpu_count(), "jax_version": jax.__version__,
+               "load_average_at_start": list(os.getloadavg()), "task_configs": TASK,
+               "note": conv_forms_ab.__doc__.split("\n\n")[0], "rounds": a.ab, "steps": steps}
+        res.update(conv_forms_ab(steps, a.ab))
+        write_results(a.out or AB_RESULTS, res)
+        return
     res = {"jax_backend": jax.default_backend(), "jax_version": jax.__version__,
            "cpu": platform.processor() or platform.machine(), "cpu_count": os.cpu_count(),
            "load_average_at_start": list(os.getloadavg()), "task_configs": TASK,
@@ -265,7 +309,7 @@ def main(argv=None):
                                                   / res["sac"][0]["ms"])
         print(f"  in-chunk / standalone per update: "
               f"{res['sac_in_chunk']['over_standalone']:.2f}", flush=True)
-    write_results(a.out, res)
+    write_results(a.out or RESULTS, res)
 
 
 if __name__ == "__main__":

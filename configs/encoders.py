@@ -38,7 +38,7 @@ def _check_positive(obj, names) -> None:
             raise ValueError(f"{cls}.{name} must be positive, got {value!r}")
 
 
-CONV_IMPLS = ("matmul", "lax")
+CONV_IMPLS = ("matmul", "matmul_patches", "lax")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -78,9 +78,10 @@ class VAEConfig:
     # object 128). A preset that trains on smaller batches for speed keeps the paper's
     # objective by keeping this; None = batch_size.
     kl_reference_batch: int | None = None
-    # Not in the paper: how the convolutions are computed, "matmul" (patches + one matmul per
-    # layer, roll_jax/conv.py: the fast path on XLA:CPU) or "lax" (XLA's convolutions). The
-    # parameters and values are the same (float32 roundoff).
+    # Not in the paper: how the convolutions are computed, "matmul" (one matmul per layer,
+    # roll_jax/conv.py: the fast path on XLA:CPU; the first transposed conv as col2im),
+    # "matmul_patches" (the patch form in every layer, for comparison) or "lax" (XLA's
+    # convolutions). The parameters and values are the same (float32 roundoff).
     conv_impl: str = "matmul"
 
     def __post_init__(self):

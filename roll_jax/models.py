@@ -68,9 +68,10 @@ def check_images(images, name: str = "images") -> None:
 
 
 class ConvVAE(nn.Module):
-    """``conv_impl``: "matmul" (roll_jax/conv.py, patches + one matmul per layer, the fast
-    path on XLA:CPU) or "lax" (flax's nn.Conv / nn.ConvTranspose, XLA's convolutions); the
-    parameters and values are the same either way."""
+    """``conv_impl``: "matmul" (roll_jax/conv.py, one matmul per layer, the fast path on
+    XLA:CPU), "matmul_patches" (the same with every transposed conv in the patch form) or
+    "lax" (flax's nn.Conv / nn.ConvTranspose, XLA's convolutions); the parameters and values
+    are the same either way."""
 
     latent_dim: int
     feature_dim: int = 576
@@ -78,16 +79,21 @@ class ConvVAE(nn.Module):
     conv_impl: str = "matmul"
 
     def setup(self):
-        if self.conv_impl == "matmul":
+        if self.conv_impl in ("matmul", "matmul_patches"):
             self.convs = [conv.Conv(f, k, s) for f, k, s in _CONV]
-            self.deconvs = [conv.ConvTranspose(f, k, s) for f, k, s in _DECONV]
+            # The 3x3 -> 7x7 layer as col2im: its patch form wastes 3.2x the multiply-adds
+            # (docs/training.md, "Convolutions on the CPU").
+            first = "col2im" if self.conv_impl == "matmul" else "patches"
+            self.deconvs = [conv.ConvTranspose(f, k, s, first if i == 0 else "patches")
+                            for i, (f, k, s) in enumerate(_DECONV)]
         elif self.conv_impl == "lax":
             self.convs = [nn.Conv(f, (k, k), strides=(s, s), padding="VALID")
                           for f, k, s in _CONV]
             self.deconvs = [nn.ConvTranspose(f, (k, k), strides=(s, s), padding="VALID")
                             for f, k, s in _DECONV]
         else:
-            raise ValueError(f"conv_impl must be 'matmul' or 'lax', got {self.conv_impl!r}")
+            raise ValueError(f"conv_impl must be 'matmul', 'matmul_patches' or 'lax', "
+                             f"got {self.conv_impl!r}")
         self.feature = nn.Dense(self.feature_dim)
         # rlkit's ConvVAE: fc1 (mean) and fc2 (log-variance) weights and biases U(-1e-3, 1e-3)
         # (init_w=1e-3), so training starts near the prior with the variance at its floor.

@@ -42,26 +42,28 @@ def test_conv_matches_flax(h, cin, cout, k, s):
     _compare(nn.Conv(cout, (k, k), strides=(s, s), padding="VALID"), conv.Conv(cout, k, s), x)
 
 
+@pytest.mark.parametrize("method", ["patches", "col2im"])
 @pytest.mark.parametrize("h,cin,cout,k,s", DECONVS)
-def test_conv_transpose_matches_flax(h, cin, cout, k, s):
+def test_conv_transpose_matches_flax(h, cin, cout, k, s, method):
     x = jax.random.normal(jax.random.PRNGKey(0), (3, h, h + 2, cin))
     _compare(nn.ConvTranspose(cout, (k, k), strides=(s, s), padding="VALID"),
-             conv.ConvTranspose(cout, k, s), x)
+             conv.ConvTranspose(cout, k, s, method), x)
 
 
 def test_vae_impls_share_parameters_and_values():
     fast = scene_vae_config("puck_push")
-    slow = dataclasses.replace(fast, conv_impl="lax")
     state = encoders.init_vae(jax.random.PRNGKey(0), fast)
-    assert (jax.tree.structure(state.params)
-            == jax.tree.structure(encoders.init_vae(jax.random.PRNGKey(0), slow).params))
     images = jax.random.randint(jax.random.PRNGKey(4), (4, 48, 48, 3), 0, 256).astype(jnp.uint8)
-    np.testing.assert_allclose(encoders.encode_mean(state.params, fast, images),
-                               encoders.encode_mean(state.params, slow, images),
-                               rtol=1e-5, atol=1e-6)
     z = jax.random.normal(jax.random.PRNGKey(5), (4, fast.latent_dim))
-    np.testing.assert_allclose(encoders.decode(state.params, fast, z),
-                               encoders.decode(state.params, slow, z), rtol=1e-5, atol=1e-5)
+    for impl in ("lax", "matmul_patches"):
+        other = dataclasses.replace(fast, conv_impl=impl)
+        assert (jax.tree.structure(state.params)
+                == jax.tree.structure(encoders.init_vae(jax.random.PRNGKey(0), other).params))
+        np.testing.assert_allclose(encoders.encode_mean(state.params, fast, images),
+                                   encoders.encode_mean(state.params, other, images),
+                                   rtol=1e-5, atol=1e-6)
+        np.testing.assert_allclose(encoders.decode(state.params, fast, z),
+                                   encoders.decode(state.params, other, z), rtol=1e-5, atol=1e-5)
 
 
 def test_bad_conv_impl_and_channels_refused():
@@ -69,3 +71,7 @@ def test_bad_conv_impl_and_channels_refused():
         dataclasses.replace(scene_vae_config("puck_push"), conv_impl="fft")
     with pytest.raises(ValueError, match="4 channels"):
         conv.conv_valid(jnp.zeros((1, 8, 8, 4)), jnp.zeros((3, 3, 3, 2)), 1)
+    with pytest.raises(ValueError, match="4 channels"):
+        conv.conv_transpose_col2im(jnp.zeros((1, 8, 8, 4)), jnp.zeros((3, 3, 3, 2)), 2)
+    with pytest.raises(ValueError, match="'fft'"):
+        conv.ConvTranspose(2, 3, 2, "fft").init(jax.random.PRNGKey(0), jnp.zeros((1, 4, 4, 1)))
