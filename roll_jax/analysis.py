@@ -118,14 +118,22 @@ def _units(env) -> tuple[str, float]:
 
 # ============================================================================ 1. latent vs distance
 
-def observation_set(env, key, n: int):
-    """N observations with the object uniform in its goal space and the hand uniform in its
-    box (kinematic `env.place`, rendered), and one goal from `env.sample_goal`.
+@dataclasses.dataclass(frozen=True)
+class ObservationSet:
+    """Figure 5's observations and goal, with the renderer's ground-truth labels (0 background,
+    1 robot, 2 object) for the visibility reference; numpy arrays."""
 
-    Returns (obs_rgb uint8 [n, 48, 48, 3], goal_rgb uint8 [48, 48, 3], distances [n],
-    object states [n, k]) where distances = env.goal_distance(obs, goal) (metres, radians for
-    the door) and the object states are `env.object_state`."""
-    
+    rgb: np.ndarray  # uint8 [n, 48, 48, 3]
+    goal_rgb: np.ndarray  # uint8 [48, 48, 3]
+    distances: np.ndarray  # [n] env.goal_distance(obs, goal): metres (radians for the door)
+    states: np.ndarray  # [n, k] env.object_state
+    labels: np.ndarray  # int32 [n, 48, 48]
+    goal_labels: np.ndarray  # int32 [48, 48]
+
+
+def observation_set(env, key, n: int) -> ObservationSet:
+    """N observations with the object uniform in its goal space and the hand uniform in its
+    box (kinematic `env.place`, rendered), and one goal from `env.sample_goal`."""
     k_goal, k_obs = jax.random.split(key)
 
     @jax.jit
@@ -134,13 +142,52 @@ def observation_set(env, key, n: int):
 
         def one(k):
             st = env.random_placement(*jax.random.split(k))
-            return env.render(st), env.goal_distance(st, goal), env.object_state(st)
+            rgb, labels = env.render_both(st)
+            return rgb, labels, env.goal_distance(st, goal), env.object_state(st)
 
-        rgb, dist, pos = jax.vmap(one)(keys)
-        return rgb, env.render(goal), dist, pos
+        rgb, labels, dist, pos = jax.vmap(one)(keys)
+        goal_rgb, goal_labels = env.render_both(goal)
+        return rgb, goal_rgb, dist, pos, labels, goal_labels
 
-    rgb, goal_rgb, dist, pos = run(k_goal, jax.random.split(k_obs, n))
-    return np.asarray(rgb), np.asarray(goal_rgb), np.asarray(dist), np.asarray(pos)
+    return ObservationSet(*map(np.asarray, run(k_goal, jax.random.split(k_obs, n))))
+
+
+# The hand's random placement hides the object in some observations (on the hurdle tasks the
+# arm covers the puck's goal space from the camera): an observation shows the object "hidden"
+# below HIDDEN_SHARE of the median object pixel count and "whole" from WHOLE_SHARE on.
+HIDDEN_SHARE, WHOLE_SHARE = 0.2, 0.8
+
+
+def object_visibility(labels) -> np.ndarray:
+    """Object pixels of each labelled image [n, H, W] over their median -> [n]."""
+    px = np.sum(np.asarray(labels) == 2, axis=(-2, -1)).astype(np.float64)
+    return px / max(float(np.median(px)), 1.0)
+
+
+def _centroids(labels) -> np.ndarray:
+    obj = (np.asarray(labels) == 2).astype(np.float64)
+    rows, cols = np.mgrid[0:obj.shape[-2], 0:obj.shape[-1]]
+    w = np.maximum(obj.sum((-2, -1)), 1.0)
+    return np.stack([(obj * rows).sum((-2, -1)) / w, (obj * cols).sum((-2, -1)) / w], -1)
+
+
+def pixel_reference(obs: ObservationSet) -> dict:
+    """The Figure 5 and probe statistics of a hand-built encoder with perfect segmentation:
+    the centroid (pixels) of the ground-truth object pixels, and where the object is hidden
+    the mean centroid of the other observations (the best constant guess). Not a bound on a
+    learned encoder, a yardstick: what the observations allow an encoder that sees only the
+    object's visible pixels."""
+    vis = object_visibility(obs.labels)
+    hidden = vis < HIDDEN_SHARE
+    c = _centroids(obs.labels)
+    if (~hidden).any():
+        c = np.where(hidden[:, None], c[~hidden].mean(0), c)
+    d = np.linalg.norm(c - _centroids(obs.goal_labels[None])[0], axis=-1)
+    return {"reference_spearman_object": spearman(obs.distances, d),
+            "reference_pairwise_spearman": pairwise_spearman(c, obs.states),
+            "reference_r2": position_r2(c, obs.states),
+            "share_object_hidden": float(hidden.mean()),
+            "share_object_partly_hidden": float(((vis >= HIDDEN_SHARE) & (vis < WHOLE_SHARE)).mean())}
 
 
 def position_r2(latents, positions) -> float:
@@ -557,7 +604,8 @@ def run_latent_vs_distance(task: str, ckpt: str, out: str, n: int = 500, seed: i
 
     cfg, pre, seg = load_checkpoint(ckpt, task, preset)
     env = envs_mjx.make(task)
-    obs, goal, dist, pos = observation_set(env, jax.random.PRNGKey(seed), n)
+    obs_set = observation_set(env, jax.random.PRNGKey(seed), n)
+    obs, goal, dist, pos = obs_set.rgb, obs_set.goal_rgb, obs_set.distances, obs_set.states
     encode_scene, encode_object = model_encoders(cfg, pre, seg)
     res = latent_vs_distance(obs, goal, dist, encode_scene, encode_object)
     # The object-VAE itself, on these held-out segmented images: its means against the
@@ -571,6 +619,15 @@ def run_latent_vs_distance(task: str, ckpt: str, out: str, n: int = 500, seed: i
              "object_vae_latent_std": [round(float(v), 4) for v in np.std(means, 0)],
              "scene_vae_r2": position_r2(scene, pos),
              "scene_vae_latent_std": [round(float(v), 4) for v in np.std(scene, 0)]}
+    # The same statistics on the observations that show the whole object, beside the
+    # perfect-segmentation yardstick on all of them.
+    whole = object_visibility(obs_set.labels) >= WHOLE_SHARE
+    probe.update(pixel_reference(obs_set))
+    probe.update({"whole_object_spearman_object": spearman(dist[whole],
+                                                           res["object_latent_distance"][whole]),
+                  "whole_object_vae_r2": position_r2(means[whole], pos[whole]),
+                  "whole_object_vae_pairwise_spearman": pairwise_spearman(means[whole],
+                                                                          pos[whole])})
     x_label, x_scale = _units(env)
     png, js = write_latent_vs_distance(res, out, task, x_label, x_scale,
                                        extra={"preset": cfg.preset, "ckpt": os.path.abspath(ckpt),

@@ -1,6 +1,7 @@
 """roll_jax.analysis: Spearman, latent-vs-distance (Figure 5), occlusion retrieval (App. A).
 
 Synthetic images and ideal encoders; no environment, no pretrained checkpoint."""
+import dataclasses
 import json
 import os
 
@@ -67,6 +68,41 @@ def test_position_probe_tells_an_encoding_from_noise():
     # A monotone but non-linear code still ranks (Spearman) but fits worse (R^2).
     warped = np.concatenate([np.tanh(pos * 30), pos[:, :1] * 0], 1)
     assert analysis.pairwise_spearman(warped, pos) > 0.8
+
+
+def _disc_labels(centres, radius=3.0, size=48):
+    rows, cols = np.mgrid[0:size, 0:size]
+    c = np.asarray(centres, np.float64)
+    disc = (rows - c[:, 0, None, None]) ** 2 + (cols - c[:, 1, None, None]) ** 2 <= radius ** 2
+    return np.where(disc, 2, 0).astype(np.int32)
+
+
+def test_pixel_reference_ranks_visible_discs_and_counts_hidden_ones():
+    rng = np.random.default_rng(0)
+    n = 200
+    pos = rng.uniform(10.0, 38.0, (n, 2))  # the object state: here the disc centre itself
+    goal = np.array([24.0, 24.0])
+    labels = _disc_labels(pos)
+    obs = analysis.ObservationSet(
+        rgb=np.zeros((n, 48, 48, 3), np.uint8), goal_rgb=np.zeros((48, 48, 3), np.uint8),
+        distances=np.linalg.norm(pos - goal, axis=-1), states=pos, labels=labels,
+        goal_labels=_disc_labels(goal[None])[0])
+    ref = analysis.pixel_reference(obs)
+    assert ref["reference_spearman_object"] > 0.98
+    assert ref["reference_r2"] > 0.99 and ref["reference_pairwise_spearman"] > 0.98
+    assert ref["share_object_hidden"] == 0.0 and ref["share_object_partly_hidden"] == 0.0
+
+    # An arm (robot label 1) painted over 20 discs entirely and over 30 by half of their rows
+    covered = labels.copy()
+    covered[:20] = np.where(covered[:20] == 2, 1, covered[:20])
+    rows = np.arange(48)[None, :, None]
+    half = (rows < pos[20:50, 0, None, None]) & (covered[20:50] == 2)
+    covered[20:50] = np.where(half, 1, covered[20:50])
+    hidden = analysis.pixel_reference(dataclasses.replace(obs, labels=covered))
+    assert hidden["share_object_hidden"] == pytest.approx(0.1)
+    assert hidden["share_object_partly_hidden"] == pytest.approx(0.15)
+    assert hidden["reference_spearman_object"] < ref["reference_spearman_object"] - 0.05
+    np.testing.assert_allclose(analysis.object_visibility(covered)[:20], 0.0)
 
 
 def test_latent_vs_distance_monotone_object_latent(tmp_path):
