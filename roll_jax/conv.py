@@ -61,9 +61,14 @@ def conv_transpose_valid(x: jnp.ndarray, kernel: jnp.ndarray, stride: int) -> jn
     b, h, w, _ = x.shape
     xp = jnp.pad(x, ((0, 0), (m - 1, m - 1), (m - 1, m - 1), (0, 0)))
     y = patches(xp, m, 1) @ wb  # [B, H+m-1, W+m-1, s*s*Cout]
-    hb, wb_ = h + m - 1, w + m - 1
-    y = y.reshape(b, hb, wb_, s, s, cout).transpose(0, 1, 3, 2, 4, 5)
-    y = y.reshape(b, hb * s, wb_ * s, cout)
+    return _blocks_to_image(y.reshape(b, h + m - 1, w + m - 1, s, s, cout), h, w, k, s)
+
+
+def _blocks_to_image(y: jnp.ndarray, h: int, w: int, k: int, s: int) -> jnp.ndarray:
+    """Output blocks [B, Hb, Wb, s, s, Cout] of a transposed conv of an H x W input ->
+    depth-to-space, cropped to lax's VALID size (H-1)*s + max(k, s)."""
+    b, hb, wb, _, _, cout = y.shape
+    y = y.transpose(0, 1, 3, 2, 4, 5).reshape(b, hb * s, wb * s, cout)
     size = max(k, s)
     return y[:, :(h - 1) * s + size, :(w - 1) * s + size]
 
@@ -97,9 +102,7 @@ def conv_transpose_col2im(x: jnp.ndarray, kernel: jnp.ndarray, stride: int) -> j
             phases[r][r2] = t if phases[r][r2] is None else phases[r][r2] + t
     zero = jnp.zeros((b, hb, wb, cout), x.dtype)
     grid = jnp.stack([jnp.stack([zero if p is None else p for p in row], 3) for row in phases], 3)
-    out = grid.transpose(0, 1, 3, 2, 4, 5).reshape(b, hb * s, wb * s, cout)
-    size = max(k, s)
-    return out[:, :(h - 1) * s + size, :(w - 1) * s + size]
+    return _blocks_to_image(grid, h, w, k, s)
 
 
 _TRANSPOSE_METHODS = {"patches": conv_transpose_valid, "col2im": conv_transpose_col2im}
