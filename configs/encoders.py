@@ -55,6 +55,10 @@ class VAEConfig:
     batches_per_epoch: int = 25  # "Training schedules": 25 batches per epoch
     n_pretrain_images: int = 2000  # "Training schedules": 2000 images
     occlusion_drop: float = 0.5  # "Training schedules": drop 50% of the object's pixels
+    # Not in the paper: which pixels the VAE matching loss drops. "pixels": each object pixel
+    # independently (the reference code's); "edge": the share beyond a random straight edge,
+    # as the arm hides one side of the object (losses.occlude_edge).
+    occlusion_shape: str = "pixels"
     image_size: int = 48  # "Implementation details": 48 x 48 images
     # Not in the paper. Reference code: logvar = log(1e-3) + |dense|, a variance floor.
     min_variance: float = 1e-3
@@ -94,6 +98,9 @@ class VAEConfig:
             raise ValueError(f"VAEConfig.matching_coef must be >= 0, got {self.matching_coef!r}")
         if not 0.0 <= self.occlusion_drop <= 1.0:
             raise ValueError(f"VAEConfig.occlusion_drop must be in [0, 1], got {self.occlusion_drop!r}")
+        if self.occlusion_shape not in ("pixels", "edge"):
+            raise ValueError(f"VAEConfig.occlusion_shape must be 'pixels' or 'edge', got "
+                             f"{self.occlusion_shape!r}")
         if self.image_size != 48:
             raise ValueError(f"VAEConfig.image_size must be 48 (the conv stack maps 48 -> 15 -> 7 "
                              f"-> 3 and back), got {self.image_size!r}")

@@ -573,25 +573,38 @@ def write_occlusion(result: dict, out_dir: str, task: str, extra: dict | None = 
 
 def load_checkpoint(ckpt: str, task: str, preset: str | None = None):
     """(cfg, Pretrained, seg params) from a `roll_jax.pretrain --out` directory. The preset is
-    read from DIR/pretrain.json when not given (it sets the LSTM training config)."""
-    from configs.train import make_config
+    read from DIR/pretrain.json when not given (it sets the LSTM training config), and so are
+    the pretraining's `--set` overrides."""
     from roll_jax import pretrain
     from roll_jax.segmentation import pipeline
 
-    cfg = make_config(task, "roll", checkpoint_preset(ckpt, task, preset))
+    cfg = checkpoint_config(ckpt, task, preset)
     pre = pretrain.load(os.path.join(ckpt, "encoders"), cfg)
     seg, _ = pipeline.load(os.path.join(ckpt, "segmentation"), task)
     return cfg, pre, seg
 
 
+def checkpoint_config(ckpt: str, task: str, preset: str | None = None):
+    """The ROLL config a `roll_jax.pretrain --out` directory was made with: its preset (or
+    `preset`) and its `--set` overrides, both from DIR/pretrain.json."""
+    from roll_jax.train import build_config
+
+    return build_config(task, "roll", checkpoint_preset(ckpt, task, preset),
+                        overrides=_pretrain_info(ckpt).get("overrides", []))
+
+
+def _pretrain_info(ckpt: str) -> dict:
+    meta = os.path.join(ckpt, "pretrain.json")
+    if not os.path.exists(meta):
+        return {}
+    with open(meta) as f:
+        return json.load(f)
+
+
 def checkpoint_preset(ckpt: str, task: str | None = None, preset: str | None = None) -> str:
     """`preset`, or the one a `roll_jax.pretrain --out` directory was made with
     (DIR/pretrain.json; "paper" without one); refuses a checkpoint of another `task`."""
-    meta = os.path.join(ckpt, "pretrain.json")
-    info = {}
-    if os.path.exists(meta):
-        with open(meta) as f:
-            info = json.load(f)
+    info = _pretrain_info(ckpt)
     if task is not None and info.get("task") not in (None, task):
         raise ValueError(f"checkpoint {ckpt} was pretrained for task {info['task']!r}, "
                          f"not {task!r}")

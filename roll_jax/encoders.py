@@ -103,7 +103,8 @@ def vae_train_step(state: ModelState, key: jax.Array, images: jax.Array, cfg: VA
     k_noise, k_occ = jax.random.split(key)
     occluded = None
     if cfg.matching_coef > 0:
-        occluded = losses.occlude(k_occ, images, object_masks, cfg.occlusion_drop)
+        occluded = losses.OCCLUSIONS[cfg.occlusion_shape](k_occ, images, object_masks,
+                                                          cfg.occlusion_drop)
 
     def loss_fn(p):
         return losses.vae_loss(p, vae_model(cfg), images, k_noise, cfg.effective_beta, occluded=occluded,

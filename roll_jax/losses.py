@@ -47,6 +47,30 @@ def occlude(key: jax.Array, images: jax.Array, object_mask: jax.Array | None = N
     return jnp.where(drop[..., None], jnp.zeros_like(images), images)
 
 
+def occlude_edge(key: jax.Array, images: jax.Array, object_mask: jax.Array | None = None,
+                 drop_frac: float = 0.5) -> jax.Array:
+    """Synthetic occlusion by a straight edge, as the arm covers one side of the object: of
+    each image's n object pixels, the floor(drop_frac * n) furthest along a random direction
+    are zeroed. Arguments and output as `occlude`.
+    """
+    if object_mask is None:
+        object_mask = jnp.any(images != 0, axis=-1)
+    mask = object_mask.astype(bool)
+    lead, (h, w) = mask.shape[:-2], mask.shape[-2:]
+    angle = jax.random.uniform(key, lead, maxval=2.0 * jnp.pi)
+    rows, cols = jnp.mgrid[0:h, 0:w]
+    along = (jnp.cos(angle)[..., None, None] * cols + jnp.sin(angle)[..., None, None] * rows)
+    flat = jnp.where(mask, along, -jnp.inf).reshape(lead + (h * w,))
+    n_drop = jnp.floor(drop_frac * mask.sum(axis=(-2, -1))).astype(jnp.int32)
+    descending = -jnp.sort(-flat, axis=-1)
+    threshold = jnp.take_along_axis(descending, jnp.maximum(n_drop - 1, 0)[..., None], -1)[..., 0]
+    drop = mask & (along >= threshold[..., None, None]) & (n_drop > 0)[..., None, None]
+    return jnp.where(drop[..., None], jnp.zeros_like(images), images)
+
+
+OCCLUSIONS = {"pixels": occlude, "edge": occlude_edge}
+
+
 def vae_matching_loss(params: Any, model: ConvVAE, images: jax.Array, occluded: jax.Array,
                       one_sided: bool = False) -> jax.Array:
     """L^matching(phi^s) = ||f(I^s) - f(I^s,occ)||^2 on the encoder means, batch mean."""

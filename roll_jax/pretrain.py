@@ -1,7 +1,8 @@
 """Pre-training of the scene-VAE, the object-VAE and the LSTM (Algorithm 1, first lines;
 appendix "Training schedules").
 
-    python -m roll_jax.pretrain --task TASK [--preset smoke|paper] --out DIR [--seg DIR]
+    python -m roll_jax.pretrain --task TASK [--preset smoke|cpu|paper] --out DIR [--seg DIR]
+        [--set object_vae.occlusion_shape=edge ...]
 
 - scene data: `n_pretrain_images` frames of a random policy (whole episodes from resets), or
   of states set to random goals (TrainConfig.scene_pretrain_data, per task);
@@ -296,7 +297,8 @@ def load(path: str, cfg: TrainConfig) -> Pretrained:
 
 
 def main(argv=None):
-    from configs.train import PRESETS, TASKS, make_config
+    from configs.train import PRESETS, TASKS
+    from roll_jax.train import build_config
 
     p = argparse.ArgumentParser(prog="python -m roll_jax.pretrain", description=__doc__,
                                 formatter_class=argparse.RawTextHelpFormatter)
@@ -307,13 +309,15 @@ def main(argv=None):
     p.add_argument("--out", required=True)
     p.add_argument("--seg", default=None, help="segmentation checkpoint dir (fitted if absent)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE",
+                   help="config overrides as train.py's, e.g. object_vae.occlusion_shape=edge")
     a = p.parse_args(argv)
     if a.task not in TASKS:
         p.error(f"unknown --task {a.task!r}; expected one of {', '.join(TASKS)}")
     if a.preset not in PRESETS:
         p.error(f"unknown --preset {a.preset!r}; expected one of {', '.join(PRESETS)}")
     try:
-        cfg = make_config(a.task, a.algo, a.preset)
+        cfg = build_config(a.task, a.algo, a.preset, overrides=a.set)
     except ValueError as e:
         sys.exit(f"error: {e}")
     import envs_mjx
@@ -333,7 +337,8 @@ def main(argv=None):
                    os.path.join(a.out, "recon_object.png"))
     summary = {k: [v[0], v[-1]] for k, v in info.items() if k.endswith("_loss")}
     with open(os.path.join(a.out, "pretrain.json"), "w") as f:
-        json.dump({"task": a.task, "preset": a.preset, "loss_first_last": summary}, f, indent=2)
+        json.dump({"task": a.task, "preset": a.preset, "overrides": list(a.set),
+                   "loss_first_last": summary}, f, indent=2)
     print(json.dumps(summary, indent=2))
 
 

@@ -143,6 +143,27 @@ def test_occlude_drops_object_pixels_only():
     np.testing.assert_array_equal(jnp.any(occ != 0, -1), obj & ~mask)
 
 
+def test_occlude_edge_hides_one_side_of_the_object():
+    img = disc_images(4, radius=10.0)
+    obj = np.asarray(jnp.any(img != 0, -1))
+    occ = losses.occlude_edge(jax.random.key(0), img, drop_frac=0.5)
+    assert occ.dtype == jnp.uint8 and occ.shape == img.shape
+    kept = np.asarray(jnp.any(occ != 0, -1))
+    assert not np.any(kept & ~obj)
+    assert bool(jnp.all(jnp.where(kept[..., None], occ == img, True)))
+    for i in range(4):
+        dropped = obj[i] & ~kept[i]
+        assert dropped.sum() == int(0.5 * obj[i].sum())  # floor(drop_frac * n), exactly
+        # A straight edge: the hidden and the visible halves of a disc of radius 10 lie
+        # 2 * 4r / (3 pi) ~ 8.5 px apart; independent pixel drops leave them together.
+        gap = np.linalg.norm(np.argwhere(dropped).mean(0) - np.argwhere(kept[i]).mean(0))
+        assert gap > 6.0, gap
+    np.testing.assert_array_equal(losses.occlude_edge(jax.random.key(0), img, drop_frac=0.0), img)
+    empty = jnp.zeros((2, 48, 48, 3), jnp.uint8)
+    assert not bool(jnp.any(losses.occlude_edge(jax.random.key(0), empty, drop_frac=0.5)))
+    with pytest.raises(ValueError, match="occlusion_shape"):
+        object_vae_config("puck_push", occlusion_shape="blob")
+
 def test_empty_images_give_finite_losses(vae):
     cfg, state = vae
     empty = jnp.zeros((8, 48, 48, 3), jnp.uint8)

@@ -1,6 +1,8 @@
 """Presets live in configs/presets.py: every CLI takes each of them, and they mean the same
 thing everywhere (no module keeps a copy)."""
 
+import json
+
 import pytest
 
 from configs import presets
@@ -77,3 +79,20 @@ def test_cpu_preset_trains_only_skewfits_scene_vae_online():
     assert make_config("puck_push", "skewfit", "cpu").vae_schedule == "custom_schedule_2"
     assert make_config("door_open", "skewfit", "cpu").vae_schedule == "custom_schedule"
     assert make_config("puck_push", "roll", "cpu", vae_schedule="smoke").vae_schedule == "smoke"
+
+
+def test_pretrain_overrides_reach_the_analysis_config(tmp_path):
+    from roll_jax import analysis, pretrain
+
+    with pytest.raises(SystemExit, match="occlusion_shap"):
+        pretrain.main(["--task", "puck_push", "--preset", "cpu", "--out", str(tmp_path),
+                       "--set", "object_vae.occlusion_shap=edge"])
+    with open(tmp_path / "pretrain.json", "w") as f:
+        json.dump({"task": "hurdle_top", "preset": "cpu",
+                   "overrides": ["object_vae.occlusion_shape=edge",
+                                 "object_vae.matching_coef=0.0"]}, f)
+    cfg = analysis.checkpoint_config(str(tmp_path), "hurdle_top")
+    assert cfg.preset == "cpu"
+    assert cfg.object_vae.occlusion_shape == "edge" and cfg.object_vae.matching_coef == 0.0
+    with pytest.raises(ValueError, match="hurdle_top"):
+        analysis.checkpoint_config(str(tmp_path), "puck_push")
