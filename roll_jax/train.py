@@ -114,8 +114,12 @@ def check_resume(out: str, cfg: TrainConfig) -> None:
     path = os.path.join(out, "config.json")
     if not os.path.exists(path):
         raise ValueError(f"--resume: no run to resume in {out} (missing config.json)")
+    from configs.train import config_from_json
+
     with open(path) as f:
-        saved = json.load(f)
+        # Read back through the dataclasses: a field added since the run was written takes its
+        # default, which by convention keeps the behaviour the run was made with.
+        saved = run_dir.config_json(config_from_json(json.load(f)))
     now = run_dir.config_json(cfg)
     diff = [k for k in sorted(set(saved) | set(now)) if saved.get(k) != now.get(k)]
     if diff:

@@ -109,6 +109,20 @@ def test_resume_refuses_other_config(runs, tmp_path):
         train.check_resume(str(tmp_path), tiny())
 
 
+def test_resume_accepts_a_run_written_before_a_field_existed(tmp_path):
+    import dataclasses
+
+    cfg = tiny()
+    saved = run_dir.config_json(cfg)
+    del saved["object_vae"]["occlusion_shape"]  # a run written before the field was added
+    with open(tmp_path / "config.json", "w") as f:
+        json.dump(saved, f)
+    train.check_resume(str(tmp_path), cfg)  # the default is the old behaviour: same run
+    other = dataclasses.replace(cfg, object_vae=dataclasses.replace(cfg.object_vae,
+                                                                    occlusion_shape="edge"))
+    with pytest.raises(ValueError, match="differs from the command line in 'object_vae'"):
+        train.check_resume(str(tmp_path), other)
+
 def test_equal_keys_give_equal_seeds(runs):
     """Two seeds with the same key stay identical through a chunk (no cross-seed leakage
     through the seed axis)."""
