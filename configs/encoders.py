@@ -41,6 +41,10 @@ def _check_positive(obj, names) -> None:
 CONV_IMPLS = ("matmul", "matmul_patches", "lax")
 
 
+# The VAE matching loss's occlusions (roll_jax.losses.OCCLUSIONS implements each).
+OCCLUSION_SHAPES = ("pixels", "edge")
+
+
 @dataclasses.dataclass(frozen=True)
 class VAEConfig:
     """One beta-VAE (scene or object): architecture, loss weights and pre-training schedule."""
@@ -98,8 +102,8 @@ class VAEConfig:
             raise ValueError(f"VAEConfig.matching_coef must be >= 0, got {self.matching_coef!r}")
         if not 0.0 <= self.occlusion_drop <= 1.0:
             raise ValueError(f"VAEConfig.occlusion_drop must be in [0, 1], got {self.occlusion_drop!r}")
-        if self.occlusion_shape not in ("pixels", "edge"):
-            raise ValueError(f"VAEConfig.occlusion_shape must be 'pixels' or 'edge', got "
+        if self.occlusion_shape not in OCCLUSION_SHAPES:
+            raise ValueError(f"VAEConfig.occlusion_shape must be one of {OCCLUSION_SHAPES}, got "
                              f"{self.occlusion_shape!r}")
         if self.image_size != 48:
             raise ValueError(f"VAEConfig.image_size must be 48 (the conv stack maps 48 -> 15 -> 7 "

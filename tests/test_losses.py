@@ -5,7 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from configs.encoders import LSTMConfig, object_vae_config
+from configs.encoders import OCCLUSION_SHAPES, LSTMConfig, object_vae_config
 from roll_jax import encoders, losses
 from roll_jax.models import LSTMEncoder, init_lstm_params, lstm_encode
 
@@ -163,6 +163,7 @@ def test_occlude_edge_hides_one_side_of_the_object():
     assert not bool(jnp.any(losses.occlude_edge(jax.random.key(0), empty, drop_frac=0.5)))
     with pytest.raises(ValueError, match="occlusion_shape"):
         object_vae_config("puck_push", occlusion_shape="blob")
+    assert tuple(losses.OCCLUSIONS) == OCCLUSION_SHAPES
 
 def test_empty_images_give_finite_losses(vae):
     cfg, state = vae
