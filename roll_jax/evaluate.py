@@ -125,10 +125,14 @@ def _goal_latents(enc: GoalEncoder, env, frozen, state, rgb, goal_states):
 
 
 @functools.lru_cache(maxsize=4)
-def make_rollout(cfg: TrainConfig, env):
+def make_rollout(cfg: TrainConfig):
     """jit(vmap over seeds) of one deterministic episode per goal -> per seed: final env
     states [G], frames [G, T+1, 48, 48, 3], goal latents [G, g], final achieved latents
-    [G, g]. Goals come as images (`goal_rgb`) and, for the oracle, as env states."""
+    [G, g]. Goals come as images (`goal_rgb`) and, for the oracle, as env states. Cached per
+    config (its own env), so that every run loaded with one config runs one program."""
+    import envs_mjx
+
+    env = envs_mjx.make(cfg.task)
     enc = goal_encoder(cfg)
 
     def one_seed(frozen, state, goal_rgb, goal_states, key):
@@ -165,10 +169,25 @@ def make_rollout(cfg: TrainConfig, env):
     return jax.jit(jax.vmap(one_seed, in_axes=(None, 0, None, None, None)))
 
 
+@functools.partial(jax.jit, static_argnums=(0, 2))
 def sample_goals(env, key, n: int):
     """n goal states from the task's goal space and their rendered 48x48 images."""
     states = jax.vmap(env.sample_goal)(jax.random.split(key, n))
     return states, jax.vmap(env.render)(states)
+
+
+@functools.partial(jax.jit, static_argnums=(0, 2))
+def _reset_states(env, key, n: int):
+    """n copies of one reset state: the goal-state slot of goals given only as images."""
+    return jax.tree.map(lambda x: jnp.broadcast_to(x, (n,) + x.shape), env.reset(key))
+
+
+@functools.partial(jax.jit, static_argnums=0)
+def _final_states(env, es, goal_states):
+    """Final object states [S, G, k] and true distances to the goal states [S, G]."""
+    per_seed = jax.vmap(jax.vmap(env.object_state))(es)
+    dist = jax.vmap(lambda e: jax.vmap(env.goal_distance)(e, goal_states))(es)
+    return per_seed, dist
 
 
 def evaluate(loaded: LoadedRun, goal_images: list[np.ndarray] | None, n_goals: int,
@@ -181,22 +200,24 @@ def evaluate(loaded: LoadedRun, goal_images: list[np.ndarray] | None, n_goals: i
         if goal_encoder(cfg).oracle:
             raise ValueError("an oracle run acts on true goal states: goal images cannot be "
                              "evaluated (omit --goal-image to sample goals)")
-        rgb = jnp.asarray(np.stack(goal_images))
+        rgb = jnp.asarray(np.stack(goal_images), jnp.uint8)
         # no goal state behind a user's image: a reset state fills the (unused) slot
-        goal_states = jax.tree.map(lambda x: jnp.broadcast_to(x, (rgb.shape[0],) + x.shape),
-                                   env.reset(k_goal))
+        goal_states = _reset_states(env, k_goal, rgb.shape[0])
         true_goal = False
     else:
         goal_states, rgb = sample_goals(env, k_goal, n_goals)
         true_goal = True
-    es, frames, goals, achieved = make_rollout(cfg, env)(loaded.frozen, loaded.state, rgb,
-                                                         goal_states, k_run)
+    # Both goal sources reach the rollout as committed arrays of the same types, so that they
+    # run one compiled program.
+    rgb, goal_states = jax.device_put((rgb, goal_states), jax.devices()[0])
+    es, frames, goals, achieved = make_rollout(cfg)(loaded.frozen, loaded.state, rgb,
+                                                    goal_states, k_run)
+    final_object, final_distance = _final_states(env, es, goal_states)
     out = {"goal_images": np.asarray(rgb), "frames": np.asarray(frames),
            "latent_distance": np.asarray(jnp.linalg.norm(achieved - goals, axis=-1)),
-           "final_object_state": np.asarray(jax.vmap(jax.vmap(env.object_state))(es))}
+           "final_object_state": np.asarray(final_object)}
     if true_goal:
-        out["final_distance"] = np.asarray(jax.vmap(lambda e: jax.vmap(env.goal_distance)(
-            e, goal_states))(es))
+        out["final_distance"] = np.asarray(final_distance)
     return out
 
 

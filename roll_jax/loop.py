@@ -153,11 +153,16 @@ ORACLE_SCALE = 0.1  # metres per oracle latent unit: positions enter the network
 def oracle_centre(env) -> np.ndarray:
     """The mean (hand position, object state) of 256 goal states (a fixed draw): the origin
     of the oracle's coordinates, so that the networks see centred inputs."""
-    with jax.ensure_compile_time_eval():
-        states = jax.vmap(env.sample_goal)(jax.random.split(jax.random.PRNGKey(0), 256))
+    def mean_position(key):
+        states = jax.vmap(env.sample_goal)(jax.random.split(key, 256))
         pos = jnp.concatenate([jax.vmap(env.hand_pos)(states),
                                jax.vmap(env.object_state)(states)], -1)
-        return np.asarray(jnp.mean(pos, 0))
+        return jnp.mean(pos, 0)
+
+    # One compiled program, run now even when called while a chunk is traced (op by op, the
+    # 256 MJX placements dispatch hundreds of small programs: ~11 s on 2 cores).
+    key = np.zeros(2, np.uint32)  # jax.random.PRNGKey(0), as numpy: no tracer when traced
+    return np.asarray(jax.jit(mean_position).lower(key).compile()(key))
 
 
 def oracle_obs(env, state):

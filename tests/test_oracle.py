@@ -64,9 +64,11 @@ def test_oracle_goal_bank_lies_in_the_goal_space():
     lo, hi = bank.min(0), bank.max(0)
     assert np.all(hi - lo > 0.5)  # spread over the box (> 5 cm per axis)
     assert np.all(np.abs(bank.mean(0)) < 0.2)  # centred: the goal space's middle is 0
-    goal = np.asarray(env.object_state(env.sample_goal(jax.random.PRNGKey(7))))
+    # jitted: MJX op by op dispatches hundreds of small programs
+    goal_state = jax.jit(env.sample_goal)(jax.random.PRNGKey(7))
+    goal = np.asarray(jax.jit(env.object_state)(goal_state))
     np.testing.assert_allclose(
-        loop.oracle_goal(env, env.sample_goal(jax.random.PRNGKey(7))),
+        jax.jit(lambda s: loop.oracle_goal(env, s))(goal_state),
         (goal - loop.oracle_centre(env)[3:]) / loop.ORACLE_SCALE, rtol=1e-6)
 
 
