@@ -207,9 +207,6 @@ def evaluate(loaded: LoadedRun, goal_images: list[np.ndarray] | None, n_goals: i
     else:
         goal_states, rgb = sample_goals(env, k_goal, n_goals)
         true_goal = True
-    # Both goal sources reach the rollout as committed arrays of the same types, so that they
-    # run one compiled program.
-    rgb, goal_states = jax.device_put((rgb, goal_states), jax.devices()[0])
     es, frames, goals, achieved = make_rollout(cfg)(loaded.frozen, loaded.state, rgb,
                                                     goal_states, k_run)
     final_object, final_distance = _final_states(env, es, goal_states)
