@@ -192,11 +192,13 @@ def test_occlusion_retrieval_perfect_encoder_has_zero_error(tmp_path):
         out = json.load(f)
     assert out["error_cm"] == {"lstm_matching": [0.0, 0.0], "lstm": [0.0, 0.0],
                                "vae": [0.0, 0.0]}
+    assert out["median_cm"] == {"lstm_matching": 0.0, "lstm": 0.0, "vae": 0.0}
 
     # A blind encoder (a constant) retrieves an arbitrary frame: positive error.
     res = analysis.occlusion_retrieval(jax.random.PRNGKey(1), images, masks, pos,
                                        lambda x: np.zeros((len(x), 2)), {"vae": lambda z: z})
     assert res["error_cm"]["vae"][0] > 0
+    assert res["median_cm"]["vae"] == np.median(res["errors_cm"]["vae"])
 
 
 def test_retrieval_errors_uses_history_head():
