@@ -1,5 +1,7 @@
 """MJX Sawyer scenes and a pure-JAX camera renderer (the Env contract of docs/architecture.md)."""
 
+import functools
+
 from envs_mjx.env import Env, EnvState, LABEL_BACKGROUND, LABEL_OBJECT, LABEL_ROBOT
 from envs_mjx.tasks import TASKS
 
@@ -7,9 +9,16 @@ TASK_NAMES = tuple(TASKS)
 
 
 def make(name: str) -> Env:
-    """Build a task's Env: one of TASK_NAMES."""
+    """A task's Env: one of TASK_NAMES. One instance per task and process (an Env is
+    immutable), so programs jitted per env (the training chunk, data collection) are traced
+    and compiled once however many runs the process makes."""
     if name not in TASKS:
         raise ValueError(f"unknown task {name!r}; expected one of {', '.join(TASK_NAMES)}")
+    return _make(name)
+
+
+@functools.lru_cache(maxsize=None)
+def _make(name: str) -> Env:
     return Env(TASKS[name])
 
 

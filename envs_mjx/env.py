@@ -117,6 +117,7 @@ class Env:
         self._hand_high = jnp.asarray(spec.hand_high, jnp.float32)
         self.object_qadr = self._object_qpos_address()
         self._renderers: dict[tuple[int, int], Renderer] = {}
+        self._empty: Env | None = None
         self._fingers = spec.kind == "pickup"
         if self._fingers:
             self._finger_qadr = np.array(
@@ -331,5 +332,7 @@ class Env:
         return jnp.clip(hand, self._hand_low, self._hand_high)
 
     def empty_scene(self) -> "Env":
-        """The same task without the manipulated object (background-model data)."""
-        return Env(self.spec, with_object=False)
+        """The same task without the manipulated object (background-model data); built once."""
+        if self._empty is None:
+            self._empty = Env(self.spec, with_object=False)
+        return self._empty

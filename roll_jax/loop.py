@@ -531,7 +531,19 @@ def compile_chunk(cfg: TrainConfig, env, n_devices: int = 1, seed_batch: int | N
                   evaluate: bool = True):
     """jit of the chunk over the seed axis, state donated: vmapped over all seeds
     (`seed_batch` None), or each device's seeds in a lax.map over groups of `seed_batch`
-    vmapped seeds (`sharding.over_seeds`; faster on a CPU). `evaluate`: `make_chunk`'s."""
+    vmapped seeds (`sharding.over_seeds`; faster on a CPU). `evaluate`: `make_chunk`'s.
+
+    One per (config, env, placement) in a process (`envs_mjx.make` gives one env per task):
+    a second run of the same config, e.g. a resumed run or a grid cell, calls the programs
+    this one traced and compiled. Retracing would not reliably find them in the persistent
+    cache: JAX's bounded trace caches make the lowered module depend on what the process
+    traced before (docs/training.md)."""
+    return _compiled_chunk(cfg, env, int(n_devices), seed_batch, bool(evaluate))
+
+
+@functools.lru_cache(maxsize=4)
+def _compiled_chunk(cfg: TrainConfig, env, n_devices: int, seed_batch: int | None,
+                    evaluate: bool):
     from roll_jax.sharding import over_seeds
 
     chunk = over_seeds(make_chunk(cfg, env, evaluate), cfg.seeds, n_devices, seed_batch)

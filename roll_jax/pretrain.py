@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import hashlib
 import json
 import os
@@ -53,15 +54,25 @@ def scene_dataset(env, key, n_images: int, source: str = "random_policy") -> jax
     goal space (`env.sample_goal`: hand and object placed), rlkit's
     `oracle_dataset_using_set_to_goal` that the reference code's push and hurdle launch files
     use (TrainConfig.scene_pretrain_data)."""
-    from envs_mjx.rollout import random_actions, rollout
-
     if source == "goals":
-        return jax.jit(jax.vmap(lambda k: env.render(env.sample_goal(k))))(
-            jax.random.split(key, n_images))
+        return _goal_images_fn(env)(jax.random.split(key, n_images))
     if source != "random_policy":
         raise ValueError(f"scene data source must be 'random_policy' or 'goals', got {source!r}")
-
     n_eps = -(-n_images // env.horizon)
+    rgb = _random_episodes_fn(env)(jax.random.split(key, n_eps))
+    return rgb.reshape((-1,) + rgb.shape[2:])[:n_images]
+
+
+# Built once per env: a fresh closure per call would trace and compile MJX and the renderer
+# again for every run in the process.
+@functools.lru_cache(maxsize=None)
+def _goal_images_fn(env):
+    return jax.jit(jax.vmap(lambda k: env.render(env.sample_goal(k))))
+
+
+@functools.lru_cache(maxsize=None)
+def _random_episodes_fn(env):
+    from envs_mjx.rollout import random_actions, rollout
 
     def one(k):
         k_r, k_a = jax.random.split(k)
@@ -69,8 +80,7 @@ def scene_dataset(env, key, n_images: int, source: str = "random_policy") -> jax
                           render=True)
         return traj.rgb
 
-    rgb = jax.jit(jax.vmap(one))(jax.random.split(key, n_eps))
-    return rgb.reshape((-1,) + rgb.shape[2:])[:n_images]
+    return jax.jit(jax.vmap(one))
 
 
 def object_dataset(env, seg_params, key, n_images: int):

@@ -15,6 +15,7 @@ from __future__ import annotations
 import concurrent.futures
 import contextlib
 import dataclasses
+import functools
 import json
 import os
 import time
@@ -191,12 +192,21 @@ def init_states(cfg: TrainConfig, env, keys, pre: pretrain.Pretrained,
                 sharding: shd.SeedSharding | None = None) -> loop.TrainState:
     """One seed per key [S, 2]. With a `sharding` each device builds its own seeds' state
     (nothing gathered on one device)."""
-    init = jax.vmap(lambda k: loop.init_state(k, cfg, env, pre.scene_vae, pre.lstm))
     if sharding is None:
         # Committed to the device like every chunk's output (the frozen params are), so the
         # first chunk call compiles the same program as the later ones.
-        return jax.device_put(jax.jit(init)(keys), jax.devices()[0])
-    return jax.jit(init, out_shardings=sharding.seeds)(sharding.shard(keys))
+        return jax.device_put(_init_fn(cfg, env, None)(keys, pre.scene_vae, pre.lstm),
+                              jax.devices()[0])
+    return _init_fn(cfg, env, sharding.seeds)(sharding.shard(keys), pre.scene_vae, pre.lstm)
+
+
+@functools.lru_cache(maxsize=4)
+def _init_fn(cfg: TrainConfig, env, out_shardings):
+    """jit of the seeds' initial states, built once per config (like `loop.compile_chunk`);
+    the encoders are arguments, not constants baked into the program."""
+    init = jax.vmap(lambda k, vae, lstm: loop.init_state(k, cfg, env, vae, lstm),
+                    in_axes=(0, None, None))
+    return jax.jit(init) if out_shardings is None else jax.jit(init, out_shardings=out_shardings)
 
 
 def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None = None,

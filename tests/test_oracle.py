@@ -12,18 +12,23 @@ from roll_jax.goal_encoding import Frozen, goal_encoder
 
 @pytest.fixture(scope="module")
 def chunk_out():
-    cfg = make_config("puck_push", "oracle", "smoke", seeds=1, n_eval_goals=2)
+    """One chunk of the "epoch" SAC schedule from step 0 (SAC learns in it), and the initial
+    state it started from (the schedule test below starts its variants there too)."""
+    import dataclasses
+
+    base = make_config("puck_push", "oracle", "smoke", seeds=1, n_eval_goals=2)
+    cfg = dataclasses.replace(base, sac=dataclasses.replace(base.sac, learning_starts=0))
     env = envs_mjx.make("puck_push")
     pre = pretrain.initial(cfg, jax.random.PRNGKey(0))
     state = jax.jit(lambda k: loop.init_state(k, cfg, env, pre.scene_vae, pre.lstm))(
         jax.random.PRNGKey(1))
     chunk = jax.jit(loop.make_chunk(cfg, env))
     new, metrics = chunk(state, Frozen(seg=None, object_vae=None), loop.plan_chunk(cfg, 0))
-    return cfg, env, new, metrics
+    return cfg, env, new, metrics, state
 
 
 def test_oracle_stores_true_positions(chunk_out):
-    cfg, env, state, _ = chunk_out
+    cfg, env, state, *_ = chunk_out
     enc = goal_encoder(cfg)
     assert enc.oracle and not enc.segment and not enc.lstm
     buf = state.buffer
@@ -42,12 +47,12 @@ def test_oracle_stores_true_positions(chunk_out):
     puck = (np.asarray(jax.vmap(env.object_state)(last)) - centre[3:]) / loop.ORACLE_SCALE
     np.testing.assert_allclose(obs[-cfg.n_envs:, -1, :3], hand, rtol=1e-5, atol=1e-5)
     np.testing.assert_allclose(goal[-cfg.n_envs:, -1], puck, rtol=1e-5, atol=1e-5)
-    # Random actions move the hand: the episode is not a constant.
+    # The (untrained, stochastic) policy moves the hand: the episode is not a constant.
     assert np.ptp(obs[..., :3], axis=1).max() > 0.1
 
 
 def test_oracle_evaluates_with_a_rendered_video(chunk_out):
-    cfg, _env, _state, metrics = chunk_out
+    cfg, _env, _state, metrics, _ = chunk_out
     ev = metrics["eval"]
     d = np.asarray(ev["distances"])
     assert d.shape == (cfg.n_eval_goals * cfg.episodes_per_epoch,) and np.all(np.isfinite(d))
@@ -79,19 +84,15 @@ def test_step_schedule_learns_during_collection_and_evaluates_the_start_policy(c
     test envs (`evaluate` False) trains exactly as the one with them."""
     import dataclasses
 
-    cfg, env, _, _ = chunk_out
-    sac_cfg = dataclasses.replace(cfg.sac, learning_starts=0)
-    pre = pretrain.initial(cfg, jax.random.PRNGKey(0))
-    results = {}
-    for schedule, evaluate in (("epoch", True), ("step", True), ("step", False)):
-        c = dataclasses.replace(cfg, sac=sac_cfg, sac_schedule=schedule)
-        state = jax.jit(lambda k, c=c: loop.init_state(k, c, env, pre.scene_vae, pre.lstm))(
-            jax.random.PRNGKey(1))
+    cfg, env, e_state, e_m, start = chunk_out
+    assert cfg.sac_schedule == "epoch" and cfg.sac.learning_starts == 0
+    results = {("epoch", True): (e_state, e_m)}
+    for schedule, evaluate in (("step", True), ("step", False)):
+        c = dataclasses.replace(cfg, sac_schedule=schedule)
         plan = loop.plan_chunk(c, 0)
         assert bool(plan.learn) and not bool(plan.act_random)
-        new, m = jax.jit(loop.make_chunk(c, env, evaluate))(
-            state, Frozen(seg=None, object_vae=None), plan)
-        results[schedule, evaluate] = (new, m)
+        results[schedule, evaluate] = jax.jit(loop.make_chunk(c, env, evaluate))(
+            start, Frozen(seg=None, object_vae=None), plan)
     (e_state, e_m), (s_state, s_m) = results["epoch", True], results["step", True]
     # Without the test envs the chunk trains the same: the same episodes, the same updates.
     n_state, n_m = results["step", False]

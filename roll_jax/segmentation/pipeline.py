@@ -18,6 +18,7 @@ The algorithm never reads ground-truth labels; `evaluate` uses them to score the
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 
 import jax
@@ -51,10 +52,17 @@ def record_empty_scene(env, key, n_frames: int, n_envs: int, width: int = 48,
     task's hand box; frames are interleaved in time (env 0 step 0, env 1 step 0, ...), which
     MOG2, a per-pixel statistic, does not mind.
     """
-    from envs_mjx.rollout import random_actions, rollout
-
-    empty = env.empty_scene()
     steps = -(-n_frames // n_envs)
+    rgb = _empty_walks_fn(env.empty_scene(), steps, width, height)(
+        jax.random.split(key, n_envs))  # [E, T, H, W, 3]
+    rgb = jnp.swapaxes(rgb, 0, 1).reshape((-1,) + rgb.shape[2:])
+    return rgb[:n_frames]
+
+
+@functools.lru_cache(maxsize=None)
+def _empty_walks_fn(empty, steps: int, width: int, height: int):
+    """jit(vmap) of one rendered random walk in the object-free scene, built once per env."""
+    from envs_mjx.rollout import random_actions, rollout
 
     def one(k):
         k_hand, k_act = jax.random.split(k)
@@ -63,9 +71,7 @@ def record_empty_scene(env, key, n_frames: int, n_envs: int, width: int = 48,
                           render=True, width=width, height=height)
         return traj.rgb
 
-    rgb = jax.jit(jax.vmap(one))(jax.random.split(key, n_envs))  # [E, T, H, W, 3]
-    rgb = jnp.swapaxes(rgb, 0, 1).reshape((-1,) + rgb.shape[2:])
-    return rgb[:n_frames]
+    return jax.jit(jax.vmap(one))
 
 
 def fit_background(frames, cfg: SegmentationConfig) -> mog2.MOG2Model:
@@ -123,6 +129,15 @@ def paste_distractors(key, images, labels, prob: float, near_robot: float = 0.0,
 
 # ----------------------------------------------------------------------------- fitting
 
+@functools.lru_cache(maxsize=None)
+def _distractors(cfg: SegmentationConfig):
+    """The config's distractor pasting, one function per config (the U-Net's compiled epoch
+    is cached per augmentation function)."""
+    return functools.partial(paste_distractors, prob=cfg.distractor_prob,
+                             near_robot=cfg.distractor_near_robot,
+                             max_radius=cfg.distractor_max_radius,
+                             behind_robot=cfg.distractor_behind_robot)
+
 def fit(env, key, cfg: SegmentationConfig, progress=None, frames=None):
     """Fit the background model and the robot U-Net for `env`'s task.
 
@@ -133,12 +148,8 @@ def fit(env, key, cfg: SegmentationConfig, progress=None, frames=None):
         frames = record_empty_scene(env, k_rec, cfg.n_frames, cfg.n_envs)
     background = fit_background(frames, cfg)
     robot = robot_labels(background, frames, cfg.label_background_ratio)
-    augment = lambda k, x, y: paste_distractors(k, x, y, cfg.distractor_prob,
-                                                cfg.distractor_near_robot,
-                                                cfg.distractor_max_radius,
-                                                cfg.distractor_behind_robot)
     state, history = unet.fit_unet(k_unet, frames, robot.astype(jnp.float32), cfg,
-                                   augment_fn=augment, progress=progress)
+                                   augment_fn=_distractors(cfg), progress=progress)
     params = SegParams(background=background, unet=state,
                        robot_threshold=jnp.float32(cfg.robot_threshold))
     return params, {"frames": frames, "robot_labels": robot, "unet_loss": history}
@@ -178,10 +189,10 @@ def segmented_image(rgb, mask):
 
 # ----------------------------------------------------------------------------- evaluation
 
-def random_object_states(env, key, n: int, settle_steps: int = 5, chunk: int = 32):
-    """States with the hand and the object uniform in their boxes (object in its goal space),
-    after a few random steps so the scene settles; returns numpy (rgb, labels) [n, H, W, ...].
-    State i depends only on `key` and i (not on `chunk`)."""
+@functools.lru_cache(maxsize=None)
+def _object_states_fn(env, settle_steps: int):
+    """jit(vmap) of one random object state, built once per env and settle_steps: a fresh
+    closure per call would trace and compile the MJX rollout and the renderer again."""
     from envs_mjx.rollout import random_actions, rollout
 
     def one(k):
@@ -191,12 +202,19 @@ def random_object_states(env, key, n: int, settle_steps: int = 5, chunk: int = 3
             state, _ = rollout(env, state, random_actions(k_a, settle_steps, env.action_size))
         return env.render_both(state)
 
+    return jax.jit(jax.vmap(one))
+
+
+def random_object_states(env, key, n: int, settle_steps: int = 5, chunk: int = 32):
+    """States with the hand and the object uniform in their boxes (object in its goal space),
+    after a few random steps so the scene settles; returns numpy (rgb, labels) [n, H, W, ...].
+    State i depends only on `key` and i (not on `chunk`)."""
     # Fixed chunks of `chunk` states, one compile: a single vmap over ~750 pickup states sat
     # asleep on a futex for hours on CPU (twice), while chunks of 16-32 run in < 1 s each.
     keys = jax.random.split(key, n)
     pad = -n % chunk
-    keys = jnp.concatenate([keys, keys[:pad]]) if pad else keys
-    run = jax.jit(jax.vmap(one))
+    keys = jnp.take(keys, jnp.arange(n + pad) % n, axis=0)  # whole chunks, n < chunk too
+    run = _object_states_fn(env, settle_steps)
     outs = [jax.device_get(run(keys[i:i + chunk])) for i in range(0, n + pad, chunk)]
     rgb, labels = (np.concatenate(parts)[:n] for parts in zip(*outs))
     return rgb, labels
@@ -229,6 +247,12 @@ def _summary(obj, labels) -> tuple[dict, dict]:
     return summary, scores
 
 
+@jax.jit
+def _probabilities(params: SegParams, rgb):
+    """(MOG2 foreground, U-Net robot probability) of each image."""
+    return mog2.frozen_foreground(params.background, rgb), unet.robot_probability(params.unet, rgb)
+
+
 def evaluate(env, params: SegParams, key, n_states: int) -> tuple[dict, dict]:
     """Scores over `n_states` random states whose object is visible; (summary, arrays).
 
@@ -239,11 +263,7 @@ def evaluate(env, params: SegParams, key, n_states: int) -> tuple[dict, dict]:
     visible = (labels == 2).sum((-2, -1)) > 0
     rgb, labels = rgb[visible][:n_states], labels[visible][:n_states]
 
-    def probs(p, x):
-        flat_fg = mog2.frozen_foreground(p.background, x)
-        return flat_fg, unet.robot_probability(p.unet, x)
-
-    fg, prob = (np.asarray(a) for a in jax.jit(probs)(params, jnp.asarray(rgb)))
+    fg, prob = (np.asarray(a) for a in _probabilities(params, jnp.asarray(rgb)))
     robot = prob > float(params.robot_threshold)
     obj = fg & ~robot
     summary, scores = _summary(obj, labels)
