@@ -671,7 +671,7 @@ def run_occlusion(ckpt: str, out: str, task: str = "hurdle_top", n_train: int = 
     k_path, k_vae, k_lstm, k_occ = jax.random.split(key, 4)
     puck, hand = puck_paths(k_path, task, n_train + n_eval, horizon)
     rgb = render_pushes(env, puck, hand)
-    seg_fn = jax.jit(lambda x: pipeline.segment(seg, x))
+    seg_fn = functools.partial(jax.jit(pipeline.segment), seg)  # params as arguments
     masks = batched(seg_fn, rgb.reshape((-1,) + rgb.shape[2:]), 256).reshape(rgb.shape[:-1])
     images = np.where(masks[..., None], rgb, 0).astype(np.uint8)
     t_data = time.perf_counter() - t0

@@ -16,6 +16,7 @@ OUT/reward_encoders.png (latent vs object distance and vs hand distance, per run
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 
@@ -50,11 +51,13 @@ def reward_latents(loaded, seed_index: int = 0):
     enc = goal_encoder(cfg)
     if enc.oracle:
         raise ValueError(f"{cfg.algo} run: the oracle's reward uses true states, not images")
-    state = jax.tree.map(lambda x: x[seed_index], loaded.state)
-    lstm_params = None if state.lstm is None else state.lstm.params
-
-    return jax.jit(lambda rgb: enc.encode_goal_images(loaded.frozen, state.scene_vae.params,
-                                                       lstm_params, rgb))
+    # Only the encoders' leaves of that seed (not the replay buffer's), passed as arguments
+    # rather than baked into the program as constants.
+    lstm = loaded.state.lstm
+    params = jax.tree.map(lambda x: x[seed_index], (
+        loaded.state.scene_vae.params, None if lstm is None else lstm.params))
+    encode = jax.jit(lambda frozen, p, rgb: enc.encode_goal_images(frozen, p[0], p[1], rgb))
+    return functools.partial(encode, loaded.frozen, params)
 
 
 def correlations(encode, pairs) -> dict:

@@ -197,7 +197,8 @@ def init_states(cfg: TrainConfig, env, keys, pre: pretrain.Pretrained,
         # first chunk call compiles the same program as the later ones.
         return jax.device_put(_init_fn(cfg, env, None)(keys, pre.scene_vae, pre.lstm),
                               jax.devices()[0])
-    return _init_fn(cfg, env, sharding.seeds)(sharding.shard(keys), pre.scene_vae, pre.lstm)
+    encoders = sharding.replicate((pre.scene_vae, pre.lstm))
+    return _init_fn(cfg, env, sharding.seeds)(sharding.shard(keys), *encoders)
 
 
 @functools.lru_cache(maxsize=4)

@@ -12,11 +12,13 @@ from roll_jax.goal_encoding import Frozen, goal_encoder
 
 @pytest.fixture(scope="module")
 def chunk_out():
-    """One chunk of the "epoch" SAC schedule from step 0 (SAC learns in it), and the initial
-    state it started from (the schedule test below starts its variants there too)."""
+    """One chunk of the "step" SAC schedule from step 0 (SAC learns during it: the cpu
+    preset's schedule; the smoke ROLL runs of test_train cover "epoch"), and the initial state
+    it started from (the schedule test below starts its variants there too)."""
     import dataclasses
 
-    base = make_config("puck_push", "oracle", "smoke", seeds=1, n_eval_goals=2)
+    base = make_config("puck_push", "oracle", "smoke", seeds=1, n_eval_goals=2,
+                       sac_schedule="step")
     cfg = dataclasses.replace(base, sac=dataclasses.replace(base.sac, learning_starts=0))
     env = envs_mjx.make("puck_push")
     pre = pretrain.initial(cfg, jax.random.PRNGKey(0))
@@ -24,7 +26,7 @@ def chunk_out():
         jax.random.PRNGKey(1))
     chunk = jax.jit(loop.make_chunk(cfg, env))
     new, metrics = chunk(state, Frozen(seg=None, object_vae=None), loop.plan_chunk(cfg, 0))
-    return cfg, env, new, metrics, state
+    return cfg, env, new, metrics, state, chunk
 
 
 def test_oracle_stores_true_positions(chunk_out):
@@ -52,7 +54,7 @@ def test_oracle_stores_true_positions(chunk_out):
 
 
 def test_oracle_evaluates_with_a_rendered_video(chunk_out):
-    cfg, _env, _state, metrics, _ = chunk_out
+    cfg, _env, _state, metrics, *_ = chunk_out
     ev = metrics["eval"]
     d = np.asarray(ev["distances"])
     assert d.shape == (cfg.n_eval_goals * cfg.episodes_per_epoch,) and np.all(np.isfinite(d))
@@ -79,23 +81,20 @@ def test_oracle_goal_bank_lies_in_the_goal_space():
 
 def test_step_schedule_learns_during_collection_and_evaluates_the_start_policy(chunk_out):
     """sac_schedule "step": the updates run inside the episode (the SAC state after the chunk
-    has them all), while the test envs act with the policy the chunk started from: their
-    distances equal those of the "epoch" schedule from the same state. A chunk without the
-    test envs (`evaluate` False) trains exactly as the one with them."""
-    import dataclasses
-
-    cfg, env, e_state, e_m, start = chunk_out
-    assert cfg.sac_schedule == "epoch" and cfg.sac.learning_starts == 0
-    results = {("epoch", True): (e_state, e_m)}
-    for schedule, evaluate in (("step", True), ("step", False)):
-        c = dataclasses.replace(cfg, sac_schedule=schedule)
-        plan = loop.plan_chunk(c, 0)
-        assert bool(plan.learn) and not bool(plan.act_random)
-        results[schedule, evaluate] = jax.jit(loop.make_chunk(c, env, evaluate))(
-            start, Frozen(seg=None, object_vae=None), plan)
-    (e_state, e_m), (s_state, s_m) = results["epoch", True], results["step", True]
+    has them all; the training envs' actions differ from those of a chunk that does not
+    learn), while the test envs act with the policy the chunk started from: their distances
+    equal those of that chunk. A chunk without the test envs (`evaluate` False) trains
+    exactly as the one with them."""
+    cfg, env, s_state, s_m, start, chunk = chunk_out
+    assert cfg.sac_schedule == "step" and cfg.sac.learning_starts == 0
+    frozen = Frozen(seg=None, object_vae=None)
+    plan = loop.plan_chunk(cfg, 0)
+    assert bool(plan.learn) and not bool(plan.act_random)
+    # The same program and start, SAC off: the policy stays the one the chunk started with.
+    f_state, f_m = chunk(start, frozen, plan.replace(learn=jax.numpy.bool_(False)))
+    assert int(f_state.sac.step) == 0
+    n_state, n_m = jax.jit(loop.make_chunk(cfg, env, False))(start, frozen, plan)
     # Without the test envs the chunk trains the same: the same episodes, the same updates.
-    n_state, n_m = results["step", False]
     assert "eval" not in n_m
     np.testing.assert_array_equal(np.asarray(n_state.buffer.actions),
                                   np.asarray(s_state.buffer.actions))
@@ -104,9 +103,9 @@ def test_step_schedule_learns_during_collection_and_evaluates_the_start_policy(c
     for a, b in zip(jax.tree.leaves(n_state.sac), jax.tree.leaves(s_state.sac)):
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-5, atol=1e-6)
     n_updates = cfg.epoch_env_steps * cfg.sac.updates_per_step
-    assert int(e_state.sac.step) == int(s_state.sac.step) == n_updates
+    assert int(s_state.sac.step) == n_updates
     np.testing.assert_allclose(np.asarray(s_m["eval"]["distances"]),
-                               np.asarray(e_m["eval"]["distances"]), rtol=1e-6, atol=1e-7)
+                               np.asarray(f_m["eval"]["distances"]), rtol=1e-6, atol=1e-7)
     # The training envs acted with a policy that changed during the episode: other actions.
-    assert not np.allclose(np.asarray(s_state.buffer.actions), np.asarray(e_state.buffer.actions))
+    assert not np.allclose(np.asarray(s_state.buffer.actions), np.asarray(f_state.buffer.actions))
     assert np.isfinite(float(s_m["train"]["q_loss"])) and float(s_m["train"]["q_loss"]) != 0.0
