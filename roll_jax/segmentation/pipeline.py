@@ -138,6 +138,7 @@ def _distractors(cfg: SegmentationConfig):
                              max_radius=cfg.distractor_max_radius,
                              behind_robot=cfg.distractor_behind_robot)
 
+
 def fit(env, key, cfg: SegmentationConfig, progress=None, frames=None):
     """Fit the background model and the robot U-Net for `env`'s task.
 
