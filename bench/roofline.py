@@ -250,10 +250,8 @@ def bench_sac_in_chunk() -> dict:
 
 def sac_yardsticks(steps: int) -> dict:
     """ms per update of bench/sac_parts.py's variants at the cpu preset's sizes, this process."""
-    spec = importlib.util.spec_from_file_location("bench_sac_parts", os.path.join(
-        ROOT, "bench", "sac_parts.py"))
-    sp = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(sp)
+    from bench import sac_parts as sp
+
     out = {}
     for name, (fn, args) in sp.variants(steps).items():
         if name != "HER sampling and relabeling alone":

@@ -101,8 +101,8 @@ def test_segment_is_jittable_and_batched(fitted):
     np.testing.assert_array_equal(np.asarray(m1).reshape(6, 48, 48), np.asarray(m2))
     seg = pipeline.segmented_image(rgb, m2)
     assert (np.asarray(seg)[~np.asarray(m2)] == 0).all()
-    # Any number of states runs in whole chunks of one compiled program: 6 here, 40 and 80
-    # (`evaluate`) above, 4 below, all one program for the env.
+    # Any number of states runs in whole chunks of one compiled program: 40 and 80
+    # (`evaluate`) above, 6 and 4 here, all one program for the env.
     rgb4, _ = pipeline.random_object_states(env, jax.random.PRNGKey(2), 4)
     np.testing.assert_array_equal(rgb4, rgb[:4])  # state i depends on the key and i only
     assert pipeline._object_states_fn(env, 5)._cache_size() == 1
