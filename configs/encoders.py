@@ -20,6 +20,9 @@ _SCENE_LATENT = {
     "roll": dict(zip(TASKS, (6, 6, 6, 16, 16))),  # Table 2: latent size in ROLL
 }
 _VAE_MATCHING_COEF = dict(zip(TASKS, (400.0, 400.0, 800.0, 50.0, 50.0)))  # Table 2
+# Not in the paper: the reference code's launch files (occlusion_prob) occlude this share of
+# the object pre-training images (push and both hurdles 0.3, door and pickup 0).
+_PRETRAIN_OCCLUDED_FRACTION = dict(zip(TASKS, (0.3, 0.3, 0.3, 0.0, 0.0)))
 
 SCENE_FEATURE_DIM = 576  # "Network Architectures": final encoder feature vector of size 576
 OBJECT_FEATURE_DIM = 6  # "Network Architectures": object-VAE feature vector of size 6
@@ -63,6 +66,13 @@ class VAEConfig:
     # independently (the reference code's); "edge": the share beyond a random straight edge,
     # as the arm hides one side of the object (losses.occlude_edge).
     occlusion_shape: str = "pixels"
+    # Not in the paper. The reference code (ROLL/generate_LSTM_vae_only_dataset.py with the
+    # launch files' occlusion_prob / occlusion_level) stores this share of the object
+    # pre-training images with each pixel dropped with probability `pretrain_occluded_drop`,
+    # once, when the dataset is made; the VAE (reconstruction, KL and matching) and the LSTM
+    # then train on them like on the others. Per task: object_vae_config.
+    pretrain_occluded_fraction: float = 0.0
+    pretrain_occluded_drop: float = 0.5
     image_size: int = 48  # "Implementation details": 48 x 48 images
     # Not in the paper. Reference code: logvar = log(1e-3) + |dense|, a variance floor.
     min_variance: float = 1e-3
@@ -102,6 +112,9 @@ class VAEConfig:
             raise ValueError(f"VAEConfig.matching_coef must be >= 0, got {self.matching_coef!r}")
         if not 0.0 <= self.occlusion_drop <= 1.0:
             raise ValueError(f"VAEConfig.occlusion_drop must be in [0, 1], got {self.occlusion_drop!r}")
+        for name in ("pretrain_occluded_fraction", "pretrain_occluded_drop"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"VAEConfig.{name} must be in [0, 1], got {getattr(self, name)!r}")
         if self.occlusion_shape not in OCCLUSION_SHAPES:
             raise ValueError(f"VAEConfig.occlusion_shape must be one of {OCCLUSION_SHAPES}, got "
                              f"{self.occlusion_shape!r}")
@@ -201,6 +214,7 @@ def object_vae_config(task: str, **overrides) -> VAEConfig:
         "matching_coef": _VAE_MATCHING_COEF[task],  # Table 2
         "batch_size": 128,  # Table 3
         "kl_reference_batch": 128,  # Table 3: the batch beta was tuned with (see effective_beta)
+        "pretrain_occluded_fraction": _PRETRAIN_OCCLUDED_FRACTION[task],  # reference code
     }
     return VAEConfig(**{**values, **overrides})
 

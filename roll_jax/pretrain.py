@@ -27,6 +27,7 @@ import os
 import sys
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
@@ -91,6 +92,17 @@ def object_dataset(env, seg_params, key, n_images: int):
     rgb, _ = pipeline.random_object_states(env, key, n_images, settle_steps=0)
     masks = jax.jit(pipeline.segment)(seg_params, rgb)
     return pipeline.segmented_image(rgb, masks), masks
+
+
+def occlude_share(key, images, masks, fraction: float, drop: float):
+    """The reference code's occluded pre-training images: each image is, with probability
+    `fraction`, stored with every pixel dropped with probability `drop` (one mask per image).
+    images uint8 [n, H, W, 3], masks bool [n, H, W] -> the same, masks reduced to the object
+    pixels left."""
+    k_pick, k_pix = jax.random.split(key)
+    picked = jax.random.bernoulli(k_pick, fraction, images.shape[:1])
+    dropped = jax.random.bernoulli(k_pix, drop, masks.shape) & picked[:, None, None]
+    return jnp.where(dropped[..., None], jnp.zeros_like(images), images), masks & ~dropped
 
 
 def _fit_vae(key, cfg, data, masks, desc, progress: bool):
@@ -201,14 +213,23 @@ def pretrain(cfg: TrainConfig, env, seg_params, key, progress: bool = True,
     if enc.object_cfg is not None:
         ocfg, n_obj = enc.object_cfg, enc.object_cfg.n_pretrain_images
         od_spec = {"task": cfg.task, "segmentation": _digest(seg_params), "n": n_obj,
-                   "key": _key(k_od)}
+                   "key": _key(k_od), "occluded": [ocfg.pretrain_occluded_fraction,
+                                                   ocfg.pretrain_occluded_drop]}
+
+        def build_object_data():
+            images, masks = object_dataset(env, seg_params, k_od, n_obj)
+            if ocfg.pretrain_occluded_fraction > 0:
+                images, masks = occlude_share(jax.random.fold_in(k_od, 1), images, masks,
+                                              ocfg.pretrain_occluded_fraction,
+                                              ocfg.pretrain_occluded_drop)
+            return (images, masks), None
 
         def object_data():
             if "object" not in data:
                 shape = (n_obj,) + ocfg.image_shape
                 (data["object"], data["masks"]), _ = _cached(
                     cache, "object_data", od_spec,
-                    lambda: (object_dataset(env, seg_params, k_od, n_obj), None),
+                    build_object_data,
                     lambda: (jax.ShapeDtypeStruct(shape, jax.numpy.uint8),
                              jax.ShapeDtypeStruct(shape[:-1], jax.numpy.bool_)))
                 info["object_data"] = data["object"]

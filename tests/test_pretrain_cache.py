@@ -95,3 +95,43 @@ def test_scene_data_from_goals_are_rendered_goal_states():
     assert len({np.asarray(x).tobytes() for x in data}) == 4  # four different goal states
     with pytest.raises(ValueError, match="'random_policy' or 'goals', got 'expert'"):
         pretrain.scene_dataset(env, key, 4, "expert")
+
+
+def test_occlude_share_drops_pixels_of_about_that_share_of_images():
+    n = 400
+    yy, xx = np.mgrid[0:48, 0:48]
+    disc = (yy - 24) ** 2 + (xx - 24) ** 2 <= 36
+    masks = jnp.broadcast_to(jnp.asarray(disc), (n, 48, 48))
+    images = jnp.where(masks[..., None], jnp.uint8(180), jnp.uint8(0))
+    out, out_masks = pretrain.occlude_share(jax.random.PRNGKey(0), images, masks, 0.3, 0.5)
+    out, out_masks, images = np.asarray(out), np.asarray(out_masks), np.asarray(images)
+    changed = np.any(out != images, axis=(1, 2, 3))
+    assert 0.22 < changed.mean() < 0.38
+    np.testing.assert_array_equal(out[~changed], images[~changed])
+    assert np.all((out == images) | (out == 0))  # pixels are only dropped
+    kept = out_masks[changed].sum((1, 2)) / disc.sum()
+    assert 0.35 < kept.mean() < 0.65
+    np.testing.assert_array_equal(out_masks, np.any(out != 0, axis=-1))  # the pixels left
+    same, _ = pretrain.occlude_share(jax.random.PRNGKey(0), images, masks, 0.0, 0.5)
+    np.testing.assert_array_equal(same, images)
+
+
+def test_object_data_holds_the_reference_share_of_occluded_images(built, tmp_path):
+    from configs.encoders import object_vae_config
+
+    assert [object_vae_config(t).pretrain_occluded_fraction for t in
+            ("puck_push", "hurdle_bottom", "hurdle_top", "door_open", "pickup")] == [
+        0.3, 0.3, 0.3, 0.0, 0.0]
+    with pytest.raises(ValueError, match="pretrain_occluded_fraction must be in \\[0, 1\\], got 1.5"):
+        object_vae_config("puck_push", pretrain_occluded_fraction=1.5)
+    cache, key, seg = str(tmp_path / "pretrain"), jax.random.PRNGKey(3), {"w": jnp.ones(3)}
+    cfg = tiny()
+    clean = dataclasses.replace(cfg, object_vae=dataclasses.replace(
+        cfg.object_vae, pretrain_occluded_fraction=0.0))
+    _, info = pretrain.pretrain(cfg, None, seg, key, progress=False, cache=cache)
+    _, info0 = pretrain.pretrain(clean, None, seg, key, progress=False, cache=cache)
+    assert built["object_data"] == 2  # the share is part of the object data's cache key
+    occ, base = np.asarray(info["object_data"]), np.asarray(info0["object_data"])
+    changed = np.any(occ != base, axis=(1, 2, 3))
+    assert 0 < changed.sum() < len(base)  # 12 images at 0.3: some, not all
+    assert np.all((occ == base) | (occ == 0))
