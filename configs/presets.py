@@ -103,8 +103,8 @@ CPU = Preset("cpu", "sized for a 2-core CPU: learns puck pushing within a sessio
         # paper's 400 shrinks every latent mean to a 0.005 scale, where the N(0, I) prior
         # goals lie far off the data; 4 keeps unit scale and ranks best (docs/analysis.md).
         "matching_coef_factor": 0.01,
-        # The reference code's occluded share of the pre-training images (0.3 on the push
-        # tasks) is not yet measured at this budget: the cpu preset's figures are without it.
+        # The reference code's occluded share of the pre-training images (0.3 on push and
+        # both hurdles) is not yet measured at this budget: the cpu preset's figures are without it.
         "pretrain_occluded_fraction": 0.0,
     },
     "lstm": {
