@@ -102,7 +102,7 @@ def parse_args(argv=None):
         p.error(f"--seeds must be >= 1, got {a.seeds}")
     out = a.out or os.path.join("runs", f"{a.task}_{a.algo}_{a.preset}")
     if a.algo == "random":
-        preset = dict(presets.get(a.preset)["rollout"])
+        preset = presets.get(a.preset).for_task("rollout", a.task)
         if a.n_envs is not None:
             if a.n_envs < 1:
                 p.error(f"--n-envs must be >= 1, got {a.n_envs}")

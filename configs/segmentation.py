@@ -97,6 +97,6 @@ def segmentation_config(task: str, preset: str = "paper", **overrides) -> Segmen
     values.update(_DISTRACTORS.get(task, {}))
     if task in _LABEL_BACKGROUND_RATIO:
         values["label_background_ratio"] = _LABEL_BACKGROUND_RATIO[task]
-    values.update(pre["segmentation"])
+    values.update(pre.for_task("segmentation", task))
     values.update(overrides)
     return SegmentationConfig(**values)

@@ -213,14 +213,14 @@ def make_config(task: str, algo: str = "roll", preset: str = "paper", **override
     values.update(
         segmentation=segmentation_config(task, preset),
         scene_vae=scene_vae_config(task, "skewfit" if algo == "skewfit" else "roll",
-                                   **pre["scene_vae"]),
-        object_vae=_object_vae(task, pre["object_vae"]),
-        lstm=lstm_config(task, **pre["lstm"]),
-        sac=SACConfig(**pre["sac"]),
+                                   **pre.for_task("scene_vae", task)),
+        object_vae=_object_vae(task, pre.for_task("object_vae", task)),
+        lstm=lstm_config(task, **pre.for_task("lstm", task)),
+        sac=SACConfig(**pre.for_task("sac", task)),
     )
-    values.update(pre["train"])
+    values.update(pre.for_task("train", task))
     if algo == "roll":
-        values.update(pre["train_roll"])
+        values.update(pre.for_task("train_roll", task))
     values.update(overrides)
     if not values.get("use_object_vae", True) and "lstm" not in overrides:
         # --no-object-vae: the LSTM runs on (and reconstructs) scene-VAE latents.

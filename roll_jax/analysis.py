@@ -742,7 +742,8 @@ def main(argv=None):
         else:
             from configs import presets
 
-            d = presets.get(checkpoint_preset(a.ckpt, a.task, a.preset))["occlusion"]
+            d = presets.get(checkpoint_preset(a.ckpt, a.task, a.preset)).for_task(
+                "occlusion", a.task)
             res = run_occlusion(a.ckpt, out, a.task,
                                 n_train=a.n_train or d["n_train"], n_eval=a.n_eval or d["n_eval"],
                                 horizon=a.horizon,

@@ -24,12 +24,12 @@ def test_preset_values_reach_the_configs():
     for group, fields in (("sac", cfg.sac), ("scene_vae", cfg.scene_vae),
                           ("object_vae", cfg.object_vae), ("lstm", cfg.lstm),
                           ("segmentation", cfg.segmentation)):
-        for k, v in cpu[group].items():
+        for k, v in cpu.for_task(group, "puck_push").items():
             if k == "matching_coef_factor":  # scales the task's Table 2 value
                 assert fields.matching_coef == v * 400.0
                 continue
             assert getattr(fields, k) == v, (group, k)
-    for k, v in cpu["train"].items():
+    for k, v in cpu.for_task("train", "puck_push").items():
         assert getattr(cfg, k) == v, k
     # The paper preset overrides nothing: the tagged defaults.
     paper = make_config("puck_push", "roll", "paper")
@@ -40,6 +40,27 @@ def test_preset_values_reach_the_configs():
     assert paper.object_vae.effective_beta == 20.0 / 128
     assert cfg.object_vae.effective_beta == cpu["object_vae"]["beta"] / 128
     assert cfg.scene_vae.effective_beta == paper.scene_vae.effective_beta == 20.0 / 64
+
+
+def test_per_task_values_resolve_per_task_and_name_a_missing_task():
+    pre = presets.Preset("x", "", {"object_vae": {
+        "beta": 3.0, "pretrain_occluded_fraction": presets.PerTask({"puck_push": 0.0,
+                                                                    "hurdle_top": 0.3})}})
+    assert pre.for_task("object_vae", "hurdle_top") == {"beta": 3.0,
+                                                        "pretrain_occluded_fraction": 0.3}
+    assert pre.for_task("object_vae", "puck_push")["pretrain_occluded_fraction"] == 0.0
+    with pytest.raises(ValueError, match="object_vae.pretrain_occluded_fraction.*'door_open'"):
+        pre.for_task("object_vae", "door_open")
+    # The presets' own per-task values reach each task's config.
+    assert make_config("hurdle_top", "roll", "cpu").object_vae.pretrain_occluded_fraction == 0.3
+    assert make_config("puck_push", "roll", "cpu").object_vae.pretrain_occluded_fraction == 0.0
+    for name in presets.PRESETS:
+        for group in ("object_vae", "scene_vae", "lstm", "sac"):
+            for k, v in presets.get(name)[group].items():
+                if isinstance(v, presets.PerTask):
+                    for task in TASKS:
+                        cfg = make_config(task, "roll", name)
+                        assert getattr(getattr(cfg, group), k) == v.get(task, k), (task, k)
 
 
 def test_unknown_preset_names_the_known_ones():
