@@ -69,9 +69,16 @@ def main(argv=None) -> int:
     if a.child:
         print("RESULT " + json.dumps(one()), flush=True)
         return 0
+    envs = {flags: dict(os.environ, XLA_FLAGS=flags, JAX_PLATFORMS="cpu", MUJOCO_GL="disable")
+            for flags in a.flags}
+    for flags, env in envs.items():  # an unknown flag fails here, not after minutes of runs
+        proc = subprocess.run([sys.executable, "-c", "import jax; jax.numpy.zeros(1) + 1"],
+                              env=env, capture_output=True, text=True, check=False)
+        if proc.returncode != 0:
+            last = (proc.stderr.strip().splitlines() or ["(no message)"])[-1]
+            raise SystemExit(f"XLA_FLAGS={flags!r} is refused by XLA: {last[-300:]}")
     results = []
-    for flags in a.flags:
-        env = dict(os.environ, XLA_FLAGS=flags, JAX_PLATFORMS="cpu", MUJOCO_GL="disable")
+    for flags, env in envs.items():
         proc = subprocess.run([sys.executable, os.path.abspath(__file__), "--child"], env=env,
                               capture_output=True, text=True, check=False)
         lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT ")]
