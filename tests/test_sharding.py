@@ -149,8 +149,8 @@ SCRIPT = textwrap.dedent("""
 @pytest.fixture(scope="module")
 def two_device_runs(tmp_path_factory):
     base = tmp_path_factory.mktemp("sharding")
-    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2",
-               JAX_PLATFORMS="cpu", MUJOCO_GL="disable")
+    flags = f"{os.environ.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count=2"
+    env = dict(os.environ, XLA_FLAGS=flags.strip(), JAX_PLATFORMS="cpu", MUJOCO_GL="disable")
     proc = subprocess.run([sys.executable, "-c", SCRIPT, str(base), os.path.join(ROOT, ".jax_cache")],
                           cwd=ROOT, env=env, capture_output=True, text=True, timeout=1800,
                           check=False)
