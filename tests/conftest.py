@@ -8,10 +8,10 @@ import importlib.util  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
 
-# XLA:CPU options that cut the compile of the test suite's training chunk by about a quarter
+# An XLA:CPU option that cuts the compile of the test suite's training chunk by about a fifth
 # without slowing it (bench/compile_flags.py; docs/training.md, "Compile time"). Set before
-# jax starts, and only where this jaxlib knows them: XLA aborts on an unknown flag.
-FAST_COMPILE_FLAGS = "--xla_cpu_use_fusion_emitters=false --xla_cpu_use_thunk_runtime=false"
+# jax starts, and only where this jaxlib knows it: XLA aborts on an unknown flag.
+FAST_COMPILE_FLAGS = "--xla_cpu_use_fusion_emitters=false"
 
 
 def _with_fast_compile(flags: str) -> str:
