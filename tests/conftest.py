@@ -9,7 +9,7 @@ import subprocess  # noqa: E402
 import sys  # noqa: E402
 
 # An XLA:CPU option that cuts the compile of the test suite's training chunk by about a fifth
-# without slowing it (bench/compile_flags.py; docs/training.md, "Compile time"). Set before
+# without slowing it (bench/compile_flags.py; the figures in docs/training.md). Set before
 # jax starts, and only where this jaxlib knows it: XLA aborts on an unknown flag.
 FAST_COMPILE_FLAGS = "--xla_cpu_use_fusion_emitters=false"
 
