@@ -52,7 +52,8 @@ def test_per_task_values_resolve_per_task_and_name_a_missing_task():
     with pytest.raises(ValueError, match="object_vae.pretrain_occluded_fraction.*'door_open'"):
         pre.for_task("object_vae", "door_open")
     # The presets' own per-task values reach each task's config.
-    assert make_config("hurdle_top", "roll", "cpu").object_vae.pretrain_occluded_fraction == 0.3
+    for task in ("hurdle_top", "hurdle_bottom"):
+        assert make_config(task, "roll", "cpu").object_vae.pretrain_occluded_fraction == 0.3
     assert make_config("puck_push", "roll", "cpu").object_vae.pretrain_occluded_fraction == 0.0
     for name in presets.PRESETS:
         for group in ("object_vae", "scene_vae", "lstm", "sac"):
