@@ -3,12 +3,15 @@ programs (the training chunk is the largest: about a minute to compile on a 2-co
 
 `train.py` uses `default_dir()` unless `--compile-cache off` (or a directory) is given; the
 reproduction grid keeps its own in DIR/.jax_cache. A cache configured earlier in the process
-(e.g. by the test suite) is left as it is.
+(e.g. by the test suite) is left as it is. `xla_flags_refusal` checks XLA_FLAGS before a
+process is started with them.
 """
 
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 
 
 def default_dir() -> str:
@@ -30,3 +33,14 @@ def use(path: str, min_compile_s: float = 1.0) -> str:
     jax.config.update("jax_compilation_cache_dir", path)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", min_compile_s)
     return path
+
+
+def xla_flags_refusal(flags: str) -> str | None:
+    """None if a fresh Python process with XLA_FLAGS=`flags` starts JAX; else XLA's last
+    message (XLA aborts the process on a flag it does not know)."""
+    proc = subprocess.run([sys.executable, "-c", "import jax; jax.numpy.zeros(1) + 1"],
+                          env=dict(os.environ, XLA_FLAGS=flags), capture_output=True,
+                          text=True, check=False)
+    if proc.returncode == 0:
+        return None
+    return (proc.stderr.strip().splitlines() or ["(no message)"])[-1][-300:]

@@ -5,8 +5,9 @@ os.environ.setdefault("JAX_PLATFORMS", "cpu")
 os.environ.setdefault("MUJOCO_GL", "disable")
 
 import importlib.util  # noqa: E402
-import subprocess  # noqa: E402
 import sys  # noqa: E402
+
+from roll_jax import compile_cache  # noqa: E402  (no jax import at module level)
 
 # An XLA:CPU option that cuts the compile of the test suite's training chunk by about a fifth
 # without slowing it (bench/compile_flags.py; the figures in docs/training.md). Set before
@@ -18,10 +19,7 @@ def _with_fast_compile(flags: str) -> str:
     if FAST_COMPILE_FLAGS in flags:
         return flags
     candidate = f"{flags} {FAST_COMPILE_FLAGS}".strip()
-    probe = subprocess.run([sys.executable, "-c", "import jax; jax.numpy.zeros(1) + 1"],
-                           env=dict(os.environ, XLA_FLAGS=candidate), capture_output=True,
-                           check=False)
-    return candidate if probe.returncode == 0 else flags
+    return flags if compile_cache.xla_flags_refusal(candidate) else candidate
 
 
 os.environ["XLA_FLAGS"] = _with_fast_compile(os.environ.get("XLA_FLAGS", ""))
