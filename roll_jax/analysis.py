@@ -200,6 +200,38 @@ def position_r2(latents, positions) -> float:
     return float(1.0 - np.sum((x @ coef - y) ** 2) / np.sum((y - y.mean(0)) ** 2))
 
 
+def _affine_cv_r2(features, y, folds: int) -> float:
+    """Held-out R^2 of an affine least-squares fit, `folds`-fold cross-validated (fold = index
+    mod folds)."""
+    x = np.concatenate([features, np.ones((len(features), 1))], 1)
+    fold = np.arange(len(y)) % folds
+    sse = 0.0
+    for f in range(folds):
+        coef, *_ = np.linalg.lstsq(x[fold != f], y[fold != f], rcond=None)
+        sse += float(np.sum((x[fold == f] @ coef - y[fold == f]) ** 2))
+    return 1.0 - sse / float(np.sum((y - y.mean(0)) ** 2))
+
+
+def position_r2_nonlinear(latents, positions, folds: int = 5, k: int = 10) -> dict:
+    """Whether the latents hold the object's state although an affine fit misses it: held-out
+    R^2 of an affine fit ("affine_cv", `position_r2` without the in-sample fit), of an affine
+    fit on the latents and their pairwise products ("quadratic_cv"), and of the mean state of
+    each latent's k nearest other latents ("knn"). A curved code scores low on the first and
+    high on the other two; a code without the state scores low on all three."""
+    z = np.asarray(latents, np.float64)
+    y = np.asarray(positions, np.float64)
+    if len(z) <= max(folds, k) or len(z) != len(y):
+        raise ValueError(f"need matching latents and states, more than max(folds, k) = "
+                         f"{max(folds, k)}; got {len(z)} latents and {len(y)} states")
+    i, j = np.triu_indices(z.shape[1])
+    quad = np.concatenate([z, z[:, i] * z[:, j]], 1)
+    d = np.sum((z[:, None] - z[None]) ** 2, -1)
+    np.fill_diagonal(d, np.inf)
+    knn = y[np.argsort(d, 1)[:, :k]].mean(1)
+    return {"affine_cv": _affine_cv_r2(z, y, folds), "quadratic_cv": _affine_cv_r2(quad, y, folds),
+            "knn": 1.0 - float(np.sum((knn - y) ** 2) / np.sum((y - y.mean(0)) ** 2))}
+
+
 def pairwise_spearman(latents, positions, max_n: int = 300) -> float:
     """Spearman of latent distance vs object-state distance over all pairs of the first
     `max_n` observations."""
@@ -643,6 +675,10 @@ def run_latent_vs_distance(task: str, ckpt: str, out: str, n: int = 500, seed: i
                   "whole_object_vae_r2": position_r2(means[whole], pos[whole]),
                   "whole_object_vae_pairwise_spearman": pairwise_spearman(means[whole],
                                                                           pos[whole])})
+    # Is an r2 short of 1 missing information or only an affine map (a curved latent)?
+    for name, m in (("object_vae", slice(None)), ("whole_object_vae", whole)):
+        probe.update({f"{name}_r2_{k}": v for k, v in
+                      position_r2_nonlinear(means[m], pos[m]).items()})
     x_label, x_scale = _units(env)
     png, js = write_latent_vs_distance(res, out, task, x_label, x_scale,
                                        extra={"preset": cfg.preset, "ckpt": os.path.abspath(ckpt),

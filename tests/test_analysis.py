@@ -70,6 +70,20 @@ def test_position_probe_tells_an_encoding_from_noise():
     assert analysis.pairwise_spearman(warped, pos) > 0.8
 
 
+def test_nonlinear_probes_tell_a_curved_code_from_a_missing_one():
+    rng = np.random.default_rng(0)
+    pos = rng.uniform(-0.1, 0.1, (400, 2))
+    # Each coordinate on an arc of +-2.5 rad: the whole position, but not affinely.
+    curved = np.concatenate([np.cos(25 * pos), np.sin(25 * pos)], 1)
+    r2 = analysis.position_r2_nonlinear(curved, pos)
+    assert analysis.position_r2(curved, pos) < 0.9 and r2["affine_cv"] < 0.9
+    assert r2["quadratic_cv"] > r2["affine_cv"] + 0.05 and r2["knn"] > 0.97
+    noise = analysis.position_r2_nonlinear(rng.normal(size=(400, 6)), pos)
+    assert max(noise.values()) < 0.1
+    with pytest.raises(ValueError, match="got 8 latents and 8 states"):
+        analysis.position_r2_nonlinear(curved[:8], pos[:8])
+
+
 def _disc_labels(centres, radius=3.0, size=48):
     rows, cols = np.mgrid[0:size, 0:size]
     c = np.asarray(centres, np.float64)
