@@ -17,11 +17,17 @@ CONVS = [(48, 3, 16, 5, 3), (15, 16, 32, 3, 2), (7, 32, 64, 3, 2)]
 DECONVS = [(3, 64, 32, 3, 2), (7, 32, 16, 3, 2), (15, 16, 3, 6, 3), (4, 2, 3, 2, 3)]
 
 
+def _normal(seed, shape):
+    """Standard-normal float32 test data from numpy: a jax.random draw compiles a program per
+    shape (about 1.5 s each here, most of this file's compile time)."""
+    return np.random.default_rng(seed).standard_normal(shape, dtype=np.float32)
+
+
 def _compare(ref, new, x):
-    params = ref.init(jax.random.PRNGKey(1), x)
+    shapes = jax.eval_shape(ref.init, jax.random.PRNGKey(1), x)
     # random biases too: flax initialises them to zero
-    params = jax.tree.map(lambda p: jax.random.normal(jax.random.PRNGKey(2), p.shape), params)
-    cot = jax.random.normal(jax.random.PRNGKey(3), jax.eval_shape(ref.apply, params, x).shape)
+    params = jax.tree.map(lambda p: _normal(2, p.shape), shapes)
+    cot = _normal(3, jax.eval_shape(ref.apply, params, x).shape)
 
     @jax.jit
     def values_and_grads(p, x):  # one compiled program per module: eager dispatch is slow
@@ -38,14 +44,14 @@ def _compare(ref, new, x):
 
 @pytest.mark.parametrize("h,cin,cout,k,s", CONVS)
 def test_conv_matches_flax(h, cin, cout, k, s):
-    x = jax.random.normal(jax.random.PRNGKey(0), (3, h, h + 1, cin))
+    x = _normal(0, (3, h, h + 1, cin))
     _compare(nn.Conv(cout, (k, k), strides=(s, s), padding="VALID"), conv.Conv(cout, k, s), x)
 
 
 @pytest.mark.parametrize("method", ["patches", "col2im"])
 @pytest.mark.parametrize("h,cin,cout,k,s", DECONVS)
 def test_conv_transpose_matches_flax(h, cin, cout, k, s, method):
-    x = jax.random.normal(jax.random.PRNGKey(0), (3, h, h + 2, cin))
+    x = _normal(0, (3, h, h + 2, cin))
     _compare(nn.ConvTranspose(cout, (k, k), strides=(s, s), padding="VALID"),
              conv.ConvTranspose(cout, k, s, method), x)
 
@@ -53,8 +59,8 @@ def test_conv_transpose_matches_flax(h, cin, cout, k, s, method):
 def test_vae_impls_share_parameters_and_values():
     fast = scene_vae_config("puck_push")
     state = encoders.init_vae(jax.random.PRNGKey(0), fast)
-    images = jax.random.randint(jax.random.PRNGKey(4), (4, 48, 48, 3), 0, 256).astype(jnp.uint8)
-    z = jax.random.normal(jax.random.PRNGKey(5), (4, fast.latent_dim))
+    images = np.random.default_rng(4).integers(0, 256, (4, 48, 48, 3), dtype=np.uint8)
+    z = _normal(5, (4, fast.latent_dim))
     for impl in ("lax", "matmul_patches"):
         other = dataclasses.replace(fast, conv_impl=impl)
         assert (jax.tree.structure(state.params)
