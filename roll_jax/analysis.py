@@ -190,26 +190,34 @@ def pixel_reference(obs: ObservationSet) -> dict:
             "share_object_partly_hidden": float(((vis >= HIDDEN_SHARE) & (vis < WHOLE_SHARE)).mean())}
 
 
+def _r2(predicted, y) -> float:
+    """R^2 of predictions of y [n, k], all coordinates pooled."""
+    return float(1.0 - np.sum((predicted - y) ** 2) / np.sum((y - y.mean(0)) ** 2))
+
+
+def _with_bias(z) -> np.ndarray:
+    return np.concatenate([z, np.ones((len(z), 1))], 1)
+
+
 def position_r2(latents, positions) -> float:
     """R^2 of a least-squares affine fit of the object states [n, k] from latents [n, d]
     (all coordinates pooled): how linearly the latents encode where the object is."""
-    z = np.asarray(latents, np.float64)
+    x = _with_bias(np.asarray(latents, np.float64))
     y = np.asarray(positions, np.float64)
-    x = np.concatenate([z, np.ones((len(z), 1))], 1)
     coef, *_ = np.linalg.lstsq(x, y, rcond=None)
-    return float(1.0 - np.sum((x @ coef - y) ** 2) / np.sum((y - y.mean(0)) ** 2))
+    return _r2(x @ coef, y)
 
 
 def _affine_cv_r2(features, y, folds: int) -> float:
     """Held-out R^2 of an affine least-squares fit, `folds`-fold cross-validated (fold = index
     mod folds)."""
-    x = np.concatenate([features, np.ones((len(features), 1))], 1)
+    x = _with_bias(features)
     fold = np.arange(len(y)) % folds
-    sse = 0.0
+    predicted = np.empty_like(y)
     for f in range(folds):
         coef, *_ = np.linalg.lstsq(x[fold != f], y[fold != f], rcond=None)
-        sse += float(np.sum((x[fold == f] @ coef - y[fold == f]) ** 2))
-    return 1.0 - sse / float(np.sum((y - y.mean(0)) ** 2))
+        predicted[fold == f] = x[fold == f] @ coef
+    return _r2(predicted, y)
 
 
 def position_r2_nonlinear(latents, positions, folds: int = 5, k: int = 10) -> dict:
@@ -230,7 +238,7 @@ def position_r2_nonlinear(latents, positions, folds: int = 5, k: int = 10) -> di
     np.fill_diagonal(d, np.inf)
     knn = y[np.argpartition(d, k, axis=1)[:, :k]].mean(1)
     return {"affine_cv": _affine_cv_r2(z, y, folds), "quadratic_cv": _affine_cv_r2(quad, y, folds),
-            "knn": 1.0 - float(np.sum((knn - y) ** 2) / np.sum((y - y.mean(0)) ** 2))}
+            "knn": _r2(knn, y)}
 
 
 def pairwise_spearman(latents, positions, max_n: int = 300) -> float:
