@@ -9,17 +9,25 @@ import sys  # noqa: E402
 
 from roll_jax import compile_cache  # noqa: E402  (no jax import at module level)
 
-# An XLA:CPU option that cuts the compile of the test suite's training chunk by about a fifth
-# without slowing it (bench/compile_flags.py; the figures in docs/training.md). Set before
-# jax starts, and only where this jaxlib knows it: XLA aborts on an unknown flag.
-FAST_COMPILE_FLAGS = "--xla_cpu_use_fusion_emitters=false"
+# XLA:CPU options that cut the suite's compiles without slowing what it runs: the older
+# elemental emitters, and LLVM at -O1 instead of -O2 (bench/compile_flags.py; the figures in
+# docs/training.md). Set before jax starts, and only where this jaxlib knows them: XLA
+# aborts on an unknown flag.
+FAST_COMPILE_FLAGS = ("--xla_cpu_use_fusion_emitters=false", "--xla_backend_optimization_level=1")
 
 
 def _with_fast_compile(flags: str) -> str:
-    if FAST_COMPILE_FLAGS in flags:
+    missing = [f for f in FAST_COMPILE_FLAGS if f.split("=")[0] not in flags]
+    if not missing:
         return flags
-    candidate = f"{flags} {FAST_COMPILE_FLAGS}".strip()
-    return flags if compile_cache.xla_flags_refusal(candidate) else candidate
+    together = " ".join([flags, *missing]).strip()
+    if not compile_cache.xla_flags_refusal(together):
+        return together
+    for flag in missing:  # one of them is unknown to this jaxlib: keep those it accepts
+        candidate = f"{flags} {flag}".strip()
+        if not compile_cache.xla_flags_refusal(candidate):
+            flags = candidate
+    return flags
 
 
 os.environ["XLA_FLAGS"] = _with_fast_compile(os.environ.get("XLA_FLAGS", ""))
@@ -31,10 +39,11 @@ _CACHE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))
 jax.config.update("jax_compilation_cache_dir", _CACHE)
 jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
 
-# Files whose fixtures compile the whole training chunk or fit models run first, so that with
-# `pytest -n 2 --dist loadfile --no-loadscope-reorder` (make test) xdist hands the two
-# slowest files to the two workers first and the short ones fill in around them.
+# The longest files run first, the slowest two one per worker: `pytest -n 2 --dist loadfile
+# --no-loadscope-reorder` (make test) hands a worker its next file when it is nearly done,
+# so the short files come last and even out the two workers' finishing times.
 _SLOW_FIRST = ("test_train.py", "test_sharding.py", "test_segmentation_pipeline.py",
+               "test_envs.py", "test_oracle.py", "test_losses.py", "test_skewfit_ablations.py",
                "test_analysis.py", "test_envs_render.py")
 
 
