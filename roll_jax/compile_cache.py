@@ -4,14 +4,16 @@ programs (the training chunk is the largest: about a minute to compile on a 2-co
 `train.py` uses `default_dir()` unless `--compile-cache off` (or a directory) is given; the
 reproduction grid keeps its own in DIR/.jax_cache. A cache configured earlier in the process
 (e.g. by the test suite) is left as it is. `xla_flags_refusal` checks XLA_FLAGS before a
-process is started with them.
+process is started with them; `accepted_options` checks per-program compiler options.
 """
 
 from __future__ import annotations
 
+import functools
 import os
 import subprocess
 import sys
+import warnings
 
 
 def default_dir() -> str:
@@ -44,3 +46,21 @@ def xla_flags_refusal(flags: str) -> str | None:
     if proc.returncode == 0:
         return None
     return (proc.stderr.strip().splitlines() or ["(no message)"])[-1][-300:]
+
+
+@functools.lru_cache(maxsize=None)
+def accepted_options(options: tuple[tuple[str, object], ...]) -> dict | None:
+    """`options` as the dict `jax.jit(..., compiler_options=...)` takes, if this jaxlib
+    compiles a tiny program with them; else None, with a warning that names them (XLA refuses
+    an option it does not know, and option names change between XLA versions)."""
+    import jax
+    import jax.numpy as jnp
+
+    opts = dict(options)
+    try:
+        jax.jit(lambda x: x + 1, compiler_options=opts).lower(jnp.zeros(1)).compile()
+    except Exception as e:  # noqa: BLE001  (the error type differs between jaxlib versions)
+        warnings.warn(f"XLA refused the compiler options {opts} ({str(e)[:200]}); "
+                      "compiling with XLA's defaults instead", stacklevel=2)
+        return None
+    return opts

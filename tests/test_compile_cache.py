@@ -1,0 +1,27 @@
+"""Per-program XLA compiler options: known ones are kept, unknown ones refused with a warning."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from roll_jax import compile_cache, loop
+
+
+def test_accepted_options_keeps_known_and_refuses_unknown_with_a_warning():
+    opts = compile_cache.accepted_options(loop.CHUNK_CPU_COMPILER_OPTIONS)
+    assert opts == dict(loop.CHUNK_CPU_COMPILER_OPTIONS)
+    assert loop.chunk_compiler_options() == opts  # the suite runs on the CPU backend
+    with pytest.warns(UserWarning, match="xla_no_such_option"):
+        assert compile_cache.accepted_options((("xla_no_such_option", 1),)) is None
+
+
+def test_a_program_built_with_the_chunk_options_computes_the_same():
+    x = np.linspace(-2.0, 2.0, 64, dtype=np.float32).reshape(8, 8)
+
+    def f(a):
+        return jnp.tanh(a @ a.T).sum(0) + jnp.exp(-a).mean()
+
+    plain = jax.jit(f)(x)
+    built = jax.jit(f, compiler_options=loop.chunk_compiler_options())(x)
+    np.testing.assert_allclose(np.asarray(built), np.asarray(plain), rtol=1e-6)
