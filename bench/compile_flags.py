@@ -40,6 +40,8 @@ def one() -> dict:
     from configs.train import make_config
     from roll_jax import loop, sharding
 
+    # The chunk's own compiler options would override the flags under test.
+    loop.chunk_compiler_options = lambda: None
     seg = segmentation_config("puck_push", "smoke", n_frames=300, unet_epochs=2, eval_states=8)
     cfg = make_config("puck_push", "roll", "smoke", seeds=2, total_env_steps=1000,
                       n_eval_goals=2, segmentation=seg)

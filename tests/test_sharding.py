@@ -149,12 +149,7 @@ SCRIPT = textwrap.dedent("""
 @pytest.fixture(scope="module")
 def two_device_runs(tmp_path_factory):
     base = tmp_path_factory.mktemp("sharding")
-    # LLVM -O0 for this process (the suite's -O1 elsewhere): its two tiny runs are
-    # compile-bound, and what it checks is placement, which the optimisation level does not
-    # touch; both runs are built at the same level. This file alone, 2-core Xeon, empty cache:
-    # 132.7 s (137 s of CPU) against 139.1 s (157 s) at -O1.
-    flags = (f"{os.environ.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count=2"
-             " --xla_backend_optimization_level=0")
+    flags = f"{os.environ.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count=2"
     env = dict(os.environ, XLA_FLAGS=flags.strip(), JAX_PLATFORMS="cpu", MUJOCO_GL="disable")
     proc = subprocess.run([sys.executable, "-c", SCRIPT, str(base), os.path.join(ROOT, ".jax_cache")],
                           cwd=ROOT, env=env, capture_output=True, text=True, timeout=1800,
