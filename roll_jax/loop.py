@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import collections
 import functools
+import os
 from typing import Any
 
 import jax
@@ -551,10 +552,13 @@ CHUNK_CPU_COMPILER_OPTIONS = (("xla_cpu_use_fusion_emitters", False),
 
 def chunk_compiler_options() -> dict | None:
     """The chunk's `compiler_options`: CHUNK_CPU_COMPILER_OPTIONS on a CPU backend (where the
-    installed jaxlib accepts them), XLA's defaults elsewhere."""
+    installed jaxlib accepts them), XLA's defaults elsewhere. An option the process's
+    XLA_FLAGS sets is left to XLA_FLAGS (a per-program option would override it)."""
     if jax.default_backend() != "cpu":
         return None
-    return compile_cache.accepted_options(CHUNK_CPU_COMPILER_OPTIONS)
+    flags = os.environ.get("XLA_FLAGS", "")
+    options = tuple((k, v) for k, v in CHUNK_CPU_COMPILER_OPTIONS if f"--{k}" not in flags)
+    return compile_cache.accepted_options(options) if options else None
 
 
 @functools.lru_cache(maxsize=4)

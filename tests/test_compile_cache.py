@@ -11,9 +11,18 @@ from roll_jax import compile_cache, loop
 def test_accepted_options_keeps_known_and_refuses_unknown_with_a_warning():
     opts = compile_cache.accepted_options(loop.CHUNK_CPU_COMPILER_OPTIONS)
     assert opts == dict(loop.CHUNK_CPU_COMPILER_OPTIONS)
-    assert loop.chunk_compiler_options() == opts  # the suite runs on the CPU backend
     with pytest.warns(UserWarning, match="xla_no_such_option"):
         assert compile_cache.accepted_options((("xla_no_such_option", 1),)) is None
+
+
+def test_chunk_options_leave_what_xla_flags_sets_to_xla_flags(monkeypatch):
+    monkeypatch.setenv("XLA_FLAGS", "")
+    assert loop.chunk_compiler_options() == dict(loop.CHUNK_CPU_COMPILER_OPTIONS)
+    monkeypatch.setenv("XLA_FLAGS", "--xla_backend_optimization_level=2")
+    assert loop.chunk_compiler_options() == {"xla_cpu_use_fusion_emitters": False}
+    monkeypatch.setenv("XLA_FLAGS", "--xla_cpu_use_fusion_emitters=true "
+                                    "--xla_backend_optimization_level=2")
+    assert loop.chunk_compiler_options() is None
 
 
 def test_a_program_built_with_the_chunk_options_computes_the_same():
@@ -23,5 +32,6 @@ def test_a_program_built_with_the_chunk_options_computes_the_same():
         return jnp.tanh(a @ a.T).sum(0) + jnp.exp(-a).mean()
 
     plain = jax.jit(f)(x)
-    built = jax.jit(f, compiler_options=loop.chunk_compiler_options())(x)
+    opts = compile_cache.accepted_options(loop.CHUNK_CPU_COMPILER_OPTIONS)
+    built = jax.jit(f, compiler_options=opts)(x)
     np.testing.assert_allclose(np.asarray(built), np.asarray(plain), rtol=1e-6)
