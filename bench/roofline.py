@@ -255,7 +255,7 @@ def sac_yardsticks(steps: int) -> dict:
     out = {}
     for name, (fn, args) in sp.variants(steps).items():
         if name != "HER sampling and relabeling alone":
-            out[name] = 1e3 * time_best(jax.jit(fn), *args)[1] / steps
+            out[name] = sp.ms_per_update(name, fn, args, steps)
     return out
 
 

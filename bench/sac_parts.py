@@ -5,7 +5,12 @@ times it, and with what it drops put back), HER sampling alone, and `loop.sac_st
 Sizes: the cpu preset's SAC (128-128, batch 256), 6-d latents, 2-d actions, a filled buffer of
 1000 episodes x 51 frames of random latents, ROLL's prior-goal bank (`loop.PRIOR_BANK`).
 Each variant runs --steps updates in one jitted `lax.scan`; the best call after a warm-up
-(`bench.common.time_best`: at least 3 calls, more until 1 s was timed).
+(`bench.common.time_best`: at least 3 calls, more until 1 s was timed). "interleaved" runs
+`loop.sac_steps` as the chunk's "step" schedule does: `updates_per_step x n_envs` updates
+under a `lax.cond` inside each step of a scan over env steps, with a 512 x 512 matmul per
+step standing in for the env's work (timed with the cond on minus off, as bench/train.py
+times the chunk). Every variant is compiled twice, with XLA's defaults and
+with the chunk's own compiler options (`loop.chunk_compiler_options`), and timed both ways.
 
     python bench/sac_parts.py [--steps 300] [--out bench/results/sac_parts.json]
 """
@@ -71,6 +76,22 @@ def variants(steps: int):
     def sac_steps(s, k):
         return loop.sac_steps(cfg, enc, s, buf, None, k, steps, bank)
 
+    per_step = cfg.n_envs * scfg.updates_per_step
+    work = jax.random.normal(ks[6], (512, 512))
+
+    def interleaved(s, k, learn):
+        zeros = jax.tree.map(jnp.zeros_like, jax.eval_shape(
+            lambda q: loop.sac_steps(cfg, enc, q, buf, None, k, per_step, bank)[1], s))
+
+        def step(c, k):
+            s, x = c
+            x = jnp.tanh(x @ work)
+            s, m = jax.lax.cond(
+                learn, lambda q: loop.sac_steps(cfg, enc, q, buf, None, k, per_step, bank),
+                lambda q: (q, zeros), s)
+            return (s, x), m
+        return jax.lax.scan(step, (s, work), jax.random.split(k, -(-steps // per_step)))
+
     key = jax.random.PRNGKey(1)
     return {
         "update, constant batch, metrics dropped (roofline standalone)":
@@ -79,7 +100,27 @@ def variants(steps: int):
         "update, new batch per update, metrics kept": (new_batch_metrics, (state, key)),
         "HER sampling and relabeling alone": (her_only, (key,)),
         "loop.sac_steps (sampling + update)": (sac_steps, (state, key)),
+        "interleaved: loop.sac_steps inside env steps": (interleaved,
+                                                           (state, key, jnp.bool_(True))),
     }
+
+
+def updates_of(name: str, steps: int) -> int:
+    """How many updates (or samplings) variant `name` runs for --steps."""
+    if name.startswith("interleaved"):
+        per_step = make_config("puck_push", "roll", "cpu")
+        per_step = per_step.n_envs * per_step.sac.updates_per_step
+        return -(-steps // per_step) * per_step
+    return steps
+
+
+def ms_per_update(name: str, fn, args, steps: int, compiler_options=None) -> float:
+    """Best-call ms per update of variant `name` (the interleaved one: learn on minus off)."""
+    f = jax.jit(fn, compiler_options=compiler_options)
+    seconds = time_best(f, *args)[1]
+    if name.startswith("interleaved"):
+        seconds -= time_best(f, *args[:-1], jnp.bool_(False))[1]
+    return seconds / updates_of(name, steps) * 1e3
 
 
 def main(argv=None):
@@ -90,14 +131,20 @@ def main(argv=None):
     a = p.parse_args(argv)
     if a.steps <= 0:
         p.error(f"--steps must be positive, got {a.steps}")
+    options = loop.chunk_compiler_options()
     rows = []
     for name, (fn, args) in variants(a.steps).items():
-        _, best = time_best(jax.jit(fn), *args)
-        ms = best / a.steps * 1e3
-        rows.append({"name": name, "ms_per_update": round(ms, 4)})
-        print(f"{name:64s} {ms:6.3f} ms per update", flush=True)
+        row = {"name": name}
+        for label, opts in (("xla_defaults", None), ("chunk_options", options)):
+            if label == "chunk_options" and opts is None:
+                continue  # not a CPU backend, or this jaxlib refuses them
+            row[f"ms_per_update_{label}"] = round(ms_per_update(name, fn, args, a.steps, opts), 4)
+        rows.append(row)
+        print(f"{name:50s} " + "  ".join(f"{k[14:]} {v:6.3f} ms" for k, v in row.items()
+                                         if k != "name"), flush=True)
     write_results(a.out, {"steps": a.steps, "jax_version": jax.__version__,
-                          "cpu_count": os.cpu_count(), "cpu_model": cpu_model(), "rows": rows})
+                          "cpu_count": os.cpu_count(), "cpu_model": cpu_model(),
+                          "chunk_compiler_options": options, "rows": rows})
 
 
 if __name__ == "__main__":
