@@ -108,8 +108,8 @@ def variants(steps: int):
 def updates_of(name: str, steps: int) -> int:
     """How many updates (or samplings) variant `name` runs for --steps."""
     if name.startswith("interleaved"):
-        per_step = make_config("puck_push", "roll", "cpu")
-        per_step = per_step.n_envs * per_step.sac.updates_per_step
+        cfg = make_config("puck_push", "roll", "cpu")
+        per_step = cfg.n_envs * cfg.sac.updates_per_step
         return -(-steps // per_step) * per_step
     return steps
 

@@ -115,7 +115,7 @@ CPU = Preset("cpu", "sized for a 2-core CPU: learns puck pushing within a sessio
         # paper 2000 x 25 batches: 1000 steps; the push latents locate and rank the object
         # best after 500-1000 steps and fold slowly after that; pickup's 3000 steps lift its
         # Fig. 5 object Spearman (mean of 2 pretraining x 3 analysis seeds 0.75 -> 0.81) for
-        # +35 s (docs/analysis.md)
+        # +35 s; on hurdle_top they lower r2 (docs/analysis.md)
         "epochs": PerTask({"puck_push": 40, "hurdle_bottom": 40, "hurdle_top": 40,
                            "door_open": 40, "pickup": 120}),
         "batch_size": 64,  # paper 128; the KL keeps beta / 128 (kl_reference_batch)
