@@ -253,9 +253,9 @@ def sac_yardsticks(steps: int) -> dict:
     from bench import sac_parts as sp
 
     out = {}
-    for name, (fn, args) in sp.variants(steps).items():
+    for name, v in sp.variants(steps).items():
         if name != "HER sampling and relabeling alone":
-            out[name] = sp.ms_per_update(name, fn, args, steps)
+            out[name] = sp.ms_per_update(v)
     return out
 
 

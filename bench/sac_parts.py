@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+from typing import Any, Callable, NamedTuple
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -33,8 +34,18 @@ from roll_jax.goal_encoding import goal_encoder  # noqa: E402
 RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "sac_parts.json")
 
 
-def variants(steps: int):
-    """name -> (jitted fn, args): each runs `steps` updates (or samplings)."""
+class Variant(NamedTuple):
+    """`fn(*args)` runs `updates` updates (or samplings); with `off_args` the time of
+    `fn(*off_args)` (the same program, its updates switched off) is subtracted."""
+    fn: Callable
+    args: tuple
+    updates: int
+    off_args: Any = None
+
+
+def variants(steps: int) -> dict[str, Variant]:
+    """name -> Variant; each runs `steps` updates (the interleaved one: rounded up to whole
+    env steps)."""
     cfg = make_config("puck_push", "roll", "cpu")
     scfg, enc = cfg.sac, goal_encoder(cfg)
     b, n, t, d = scfg.batch_size, 1000, cfg.horizon, 6
@@ -77,6 +88,7 @@ def variants(steps: int):
         return loop.sac_steps(cfg, enc, s, buf, None, k, steps, bank)
 
     per_step = cfg.n_envs * scfg.updates_per_step
+    env_steps = -(-steps // per_step)  # whole env steps of per_step updates each
     work = jax.random.normal(ks[6], (512, 512))
 
     def interleaved(s, k, learn):
@@ -90,37 +102,29 @@ def variants(steps: int):
                 learn, lambda q: loop.sac_steps(cfg, enc, q, buf, None, k, per_step, bank),
                 lambda q: (q, zeros), s)
             return (s, x), m
-        return jax.lax.scan(step, (s, work), jax.random.split(k, -(-steps // per_step)))
+        return jax.lax.scan(step, (s, work), jax.random.split(k, env_steps))
 
     key = jax.random.PRNGKey(1)
     return {
         "update, constant batch, metrics dropped (roofline standalone)":
-            (constant_batch, (state, key)),
-        "update, constant batch, metrics kept": (constant_batch_metrics, (state, key)),
-        "update, new batch per update, metrics kept": (new_batch_metrics, (state, key)),
-        "HER sampling and relabeling alone": (her_only, (key,)),
-        "loop.sac_steps (sampling + update)": (sac_steps, (state, key)),
-        "interleaved: loop.sac_steps inside env steps": (interleaved,
-                                                           (state, key, jnp.bool_(True))),
+            Variant(constant_batch, (state, key), steps),
+        "update, constant batch, metrics kept": Variant(constant_batch_metrics, (state, key), steps),
+        "update, new batch per update, metrics kept": Variant(new_batch_metrics, (state, key), steps),
+        "HER sampling and relabeling alone": Variant(her_only, (key,), steps),
+        "loop.sac_steps (sampling + update)": Variant(sac_steps, (state, key), steps),
+        "interleaved: loop.sac_steps inside env steps": Variant(
+            interleaved, (state, key, jnp.bool_(True)), env_steps * per_step,
+            off_args=(state, key, jnp.bool_(False))),
     }
 
 
-def updates_of(name: str, steps: int) -> int:
-    """How many updates (or samplings) variant `name` runs for --steps."""
-    if name.startswith("interleaved"):
-        cfg = make_config("puck_push", "roll", "cpu")
-        per_step = cfg.n_envs * cfg.sac.updates_per_step
-        return -(-steps // per_step) * per_step
-    return steps
-
-
-def ms_per_update(name: str, fn, args, steps: int, compiler_options=None) -> float:
-    """Best-call ms per update of variant `name` (the interleaved one: learn on minus off)."""
-    f = jax.jit(fn, compiler_options=compiler_options)
-    seconds = time_best(f, *args)[1]
-    if name.startswith("interleaved"):
-        seconds -= time_best(f, *args[:-1], jnp.bool_(False))[1]
-    return seconds / updates_of(name, steps) * 1e3
+def ms_per_update(v: Variant, compiler_options=None) -> float:
+    """Best-call ms per update of variant `v` (minus its updates-off time, if it has one)."""
+    f = jax.jit(v.fn, compiler_options=compiler_options)
+    seconds = time_best(f, *v.args)[1]
+    if v.off_args is not None:
+        seconds -= time_best(f, *v.off_args)[1]
+    return seconds / v.updates * 1e3
 
 
 def main(argv=None):
@@ -133,12 +137,12 @@ def main(argv=None):
         p.error(f"--steps must be positive, got {a.steps}")
     options = loop.chunk_compiler_options()
     rows = []
-    for name, (fn, args) in variants(a.steps).items():
+    for name, v in variants(a.steps).items():
         row = {"name": name}
         for label, opts in (("xla_defaults", None), ("chunk_options", options)):
             if label == "chunk_options" and opts is None:
                 continue  # not a CPU backend, or this jaxlib refuses them
-            row[f"ms_per_update_{label}"] = round(ms_per_update(name, fn, args, a.steps, opts), 4)
+            row[f"ms_per_update_{label}"] = round(ms_per_update(v, opts), 4)
         rows.append(row)
         print(f"{name:50s} " + "  ".join(f"{k[14:]} {v:6.3f} ms" for k, v in row.items()
                                          if k != "name"), flush=True)
