@@ -73,6 +73,11 @@ class VAEConfig:
     # then train on them like on the others. Per task: object_vae_config.
     pretrain_occluded_fraction: float = 0.0
     pretrain_occluded_drop: float = 0.5
+    # Share of the object pre-training images that show states set to goals (`env.sample_goal`:
+    # the hand placed at the object, on pickup mostly holding it in the air); the rest show the
+    # object and the hand placed independently. The reference code pretrains on "set to goal"
+    # images only (1.0); 0 keeps every placement of the goal space equally likely.
+    pretrain_goal_share: float = 0.0
     image_size: int = 48  # "Implementation details": 48 x 48 images
     # Not in the paper. Reference code: logvar = log(1e-3) + |dense|, a variance floor.
     min_variance: float = 1e-3
@@ -112,7 +117,8 @@ class VAEConfig:
             raise ValueError(f"VAEConfig.matching_coef must be >= 0, got {self.matching_coef!r}")
         if not 0.0 <= self.occlusion_drop <= 1.0:
             raise ValueError(f"VAEConfig.occlusion_drop must be in [0, 1], got {self.occlusion_drop!r}")
-        for name in ("pretrain_occluded_fraction", "pretrain_occluded_drop"):
+        for name in ("pretrain_occluded_fraction", "pretrain_occluded_drop",
+                     "pretrain_goal_share"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"VAEConfig.{name} must be in [0, 1], got {getattr(self, name)!r}")
         if self.occlusion_shape not in OCCLUSION_SHAPES:

@@ -77,10 +77,14 @@ _UNET_FEATURES: dict[str, int] = {"hurdle_bottom": 8, "hurdle_top": 8, "pickup":
 _LABEL_BACKGROUND_RATIO: dict[str, float] = {"door_open": 0.5, "pickup": 0.5}
 # Per-task distractor placement (our calibration, see docs/segmentation.md): the door camera
 # sees the gripper in front of the door, which the empty scene never shows, so door distractors
-# are large, mostly centred on the arm, and always drawn behind it.
+# are large, mostly centred on the arm, and always drawn behind it. pickup's goal images hold
+# the cube between the fingers, where the empty scene only ever shows fingers: cube-sized
+# distractors, all centred on the arm, teach the U-Net that a blob there is not robot.
 _DISTRACTORS: dict[str, dict] = {
     "door_open": {"distractor_prob": 0.7, "distractor_near_robot": 0.7,
                   "distractor_max_radius": 12.0, "distractor_behind_robot": 1.0},
+    "pickup": {"distractor_prob": 0.7, "distractor_near_robot": 1.0,
+               "distractor_max_radius": 4.0},
 }
 
 

@@ -654,6 +654,19 @@ def checkpoint_preset(ckpt: str, task: str | None = None, preset: str | None = N
     return preset or info.get("preset", "paper")
 
 
+def goal_mask_scores(seg, obs: ObservationSet) -> dict:
+    """How the segmentation masks the goal image, against the renderer's labels: every
+    observation is compared with that one code, so a goal whose object is half masked away
+    (pickup's cube held in the gripper) misplaces the whole ranking."""
+    from roll_jax.segmentation import pipeline
+
+    labels = jnp.asarray(obs.goal_labels)[None]
+    scores = pipeline.mask_scores(pipeline.segment(seg, jnp.asarray(obs.goal_rgb)[None]), labels)
+    return {"goal_object_pixels": int((obs.goal_labels == 2).sum()),
+            "goal_mask_iou": round(float(scores["iou"][0]), 4),
+            "goal_mask_robot_leakage": round(float(scores["robot_leakage"][0]), 4)}
+
+
 def run_latent_vs_distance(task: str, ckpt: str, out: str, n: int = 500, seed: int = 0,
                            preset: str | None = None) -> dict:
     import envs_mjx
@@ -679,6 +692,7 @@ def run_latent_vs_distance(task: str, ckpt: str, out: str, n: int = 500, seed: i
     # perfect-segmentation yardstick on all of them.
     whole = object_visibility(obs_set.labels) >= WHOLE_SHARE
     probe.update(pixel_reference(obs_set))
+    probe.update(goal_mask_scores(seg, obs_set))
     probe.update({"whole_object_spearman_object": spearman(dist[whole],
                                                            res["object_latent_distance"][whole]),
                   "whole_object_vae_r2": position_r2(means[whole], pos[whole]),

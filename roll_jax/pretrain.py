@@ -84,12 +84,23 @@ def _random_episodes_fn(env):
     return jax.jit(jax.vmap(one))
 
 
-def object_dataset(env, seg_params, key, n_images: int):
+def object_dataset(env, seg_params, key, n_images: int, goal_share: float = 0.0):
     """(segmented images uint8 [n, 48, 48, 3], object masks bool [n, 48, 48]) of random object
-    placements, masks from `segment`. The placements are taken as placed (like the goal
-    images `env.sample_goal` gives), not settled by a few physics steps: that keeps MJX's step,
-    the slowest program to compile, out of this one."""
-    rgb, _ = pipeline.random_object_states(env, key, n_images, settle_steps=0)
+    placements, masks from `segment`; the first round(goal_share * n) are states set to goals
+    (`env.sample_goal`) instead. The placements are taken as placed (like the goal images),
+    not settled by a few physics steps: that keeps MJX's step, the slowest program to compile,
+    out of this one."""
+    if not 0.0 <= goal_share <= 1.0:
+        raise ValueError(f"goal_share must be in [0, 1], got {goal_share!r}")
+    n_goals = int(round(goal_share * n_images))
+    k_place, k_goal = jax.random.split(key) if n_goals else (key, None)
+    parts = []
+    if n_goals:
+        parts.append(np.asarray(_goal_images_fn(env)(jax.random.split(k_goal, n_goals))))
+    if n_images > n_goals:
+        parts.append(pipeline.random_object_states(env, k_place, n_images - n_goals,
+                                                   settle_steps=0)[0])
+    rgb = np.concatenate(parts)
     masks = jax.jit(pipeline.segment)(seg_params, rgb)
     return pipeline.segmented_image(rgb, masks), masks
 
@@ -215,9 +226,12 @@ def pretrain(cfg: TrainConfig, env, seg_params, key, progress: bool = True,
         od_spec = {"task": cfg.task, "segmentation": _digest(seg_params), "n": n_obj,
                    "key": _key(k_od), "occluded": [ocfg.pretrain_occluded_fraction,
                                                    ocfg.pretrain_occluded_drop]}
+        if ocfg.pretrain_goal_share:  # absent at 0: earlier caches of placements stay valid
+            od_spec["goal_share"] = ocfg.pretrain_goal_share
 
         def build_object_data():
-            images, masks = object_dataset(env, seg_params, k_od, n_obj)
+            images, masks = object_dataset(env, seg_params, k_od, n_obj,
+                                           ocfg.pretrain_goal_share)
             if ocfg.pretrain_occluded_fraction > 0:
                 images, masks = occlude_share(jax.random.fold_in(k_od, 1), images, masks,
                                               ocfg.pretrain_occluded_fraction,

@@ -119,6 +119,26 @@ def test_pixel_reference_ranks_visible_discs_and_counts_hidden_ones():
     np.testing.assert_allclose(analysis.object_visibility(covered)[:20], 0.0)
 
 
+def test_goal_mask_scores_compare_the_goal_mask_with_its_labels():
+    from configs.segmentation import segmentation_config
+    from roll_jax.segmentation import pipeline
+
+    # An unfitted background model calls every pixel foreground; the threshold then decides
+    # whether the U-Net calls all of them robot (-1) or none (2: probabilities are < 1).
+    seg = pipeline.initial_params(48, 48, 3, segmentation_config("pickup", "smoke"))
+    labels = np.zeros((48, 48), np.int32)
+    labels[10:14, 10:14] = 2  # 16 object pixels
+    labels[30:34, 5:10] = 1  # 20 robot pixels
+    obs = analysis.ObservationSet(
+        rgb=np.zeros((1, 48, 48, 3), np.uint8), goal_rgb=np.full((48, 48, 3), 90, np.uint8),
+        distances=np.zeros(1), states=np.zeros((1, 2)), labels=labels[None], goal_labels=labels)
+    everything = analysis.goal_mask_scores(seg.replace(robot_threshold=np.float32(2.0)), obs)
+    assert everything == {"goal_object_pixels": 16, "goal_mask_iou": round(16 / 48 ** 2, 4),
+                          "goal_mask_robot_leakage": 1.0}
+    nothing = analysis.goal_mask_scores(seg.replace(robot_threshold=np.float32(-1.0)), obs)
+    assert nothing["goal_mask_iou"] == 0.0 and nothing["goal_mask_robot_leakage"] == 0.0
+
+
 def test_latent_vs_distance_monotone_object_latent(tmp_path):
     rng = np.random.default_rng(1)
     n = 60

@@ -35,7 +35,7 @@ def built(monkeypatch):
         counts["scene_data"] += 1
         return jax.random.randint(key, (n, 48, 48, 3), 0, 256).astype(jnp.uint8)
 
-    def object_dataset(env, seg, key, n):
+    def object_dataset(env, seg, key, n, goal_share=0.0):
         counts["object_data"] += 1
         masks = jax.random.bernoulli(key, 0.1, (n, 48, 48))
         return jnp.where(masks[..., None], jnp.full((n, 48, 48, 3), 200, jnp.uint8), 0), masks
@@ -95,6 +95,31 @@ def test_scene_data_from_goals_are_rendered_goal_states():
     assert len({np.asarray(x).tobytes() for x in data}) == 4  # four different goal states
     with pytest.raises(ValueError, match="'random_policy' or 'goals', got 'expert'"):
         pretrain.scene_dataset(env, key, 4, "expert")
+
+
+def test_object_data_holds_the_configured_share_of_goal_states():
+    import envs_mjx
+    from configs.encoders import object_vae_config
+    from configs.segmentation import segmentation_config
+    from roll_jax.segmentation import pipeline
+
+    env = envs_mjx.make("puck_push")
+    # An unfitted background model and a threshold the U-Net never passes: the mask keeps
+    # every pixel, so the segmented images are the rendered ones.
+    seg = pipeline.initial_params(48, 48, 3, segmentation_config("puck_push", "smoke"))
+    seg = seg.replace(robot_threshold=jnp.float32(2.0))
+    key = jax.random.PRNGKey(5)
+    images, masks = pretrain.object_dataset(env, seg, key, 4, goal_share=0.5)
+    assert images.shape == (4, 48, 48, 3) and bool(masks.all())
+    k_place, k_goal = jax.random.split(key)
+    goals = pretrain._goal_images_fn(env)(jax.random.split(k_goal, 2))
+    np.testing.assert_array_equal(images[:2], goals)
+    placed, _ = pipeline.random_object_states(env, k_place, 2, settle_steps=0)
+    np.testing.assert_array_equal(images[2:], placed)
+    only_placed, _ = pretrain.object_dataset(env, seg, k_place, 2)
+    np.testing.assert_array_equal(only_placed, placed)  # share 0: placements from the key
+    with pytest.raises(ValueError, match="pretrain_goal_share must be in \\[0, 1\\], got 1.2"):
+        object_vae_config("pickup", pretrain_goal_share=1.2)
 
 
 def test_occlude_share_drops_pixels_of_about_that_share_of_images():
