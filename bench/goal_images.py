@@ -1,0 +1,145 @@
+"""How a task's goal images are segmented and how much Fig. 5 depends on the one goal image.
+
+Figure 5 compares N observations with one goal through the object encoding, so a goal image
+whose object is masked badly misplaces the whole ranking. Two measurements:
+
+1. ``--seg DIR``: the segmentation's masks of `--n` goal images (`env.sample_goal`; on pickup
+   split into goals held in the air and goals on the table) against the renderer's labels:
+   IoU, the share of object pixels the background model keeps and the U-Net calls robot, robot
+   leakage, at the checkpoint's robot threshold and over a threshold sweep.
+2. ``--ckpt DIR`` (a `roll_jax.pretrain --out` directory with its segmentation): Fig. 5's
+   object Spearman of every analysis seed's observation set against every seed's goal image
+   (`--seeds`), which tells a goal that ranks badly from an observation set that does; and the
+   same with each goal's code replaced by the mean code of the observations that show the whole
+   object within 3 cm of the goal (what the goal image "should" encode).
+
+    python bench/goal_images.py --task pickup --seg runs/enc/pickup/segmentation \\
+        [--ckpt runs/enc/pickup] [--name NAME]   # bench/results/goal_images_NAME.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+
+from bench.common import write_results  # noqa: E402
+
+SWEEP = (0.1, 0.2, 0.3, 0.4, 0.5, 0.7)
+NEAR_M = 0.03
+
+
+def _scores(obj, robot, fg, labels) -> dict:
+    true, arm = labels == 2, labels == 1
+    iou = (obj & true).sum((1, 2)) / np.maximum((obj | true).sum((1, 2)), 1)
+    return {"n": int(len(labels)), "object_pixels_mean": round(float(true.sum((1, 2)).mean()), 2),
+            "iou": round(float(iou.mean()), 4),
+            "foreground_keeps_object": round(float((fg & true).sum() / max(true.sum(), 1)), 4),
+            "unet_calls_object_robot": round(float((robot & true).sum() / max(true.sum(), 1)), 4),
+            "robot_leakage": round(float((obj & arm).sum() / max(arm.sum(), 1)), 4)}
+
+
+def goal_segmentation(task: str, seg_dir: str, n: int, seed: int) -> dict:
+    import envs_mjx
+    from roll_jax.segmentation import pipeline
+
+    seg, _ = pipeline.load(seg_dir, task)
+    env = envs_mjx.make(task)
+
+    @jax.jit
+    def goals(keys):
+        def one(k):
+            g = env.sample_goal(k)
+            rgb, labels = env.render_both(g)
+            return rgb, labels, env.object_state(g)
+        return jax.vmap(one)(keys)
+
+    rgb, labels, state = map(np.asarray, goals(jax.random.split(jax.random.PRNGKey(seed), n)))
+    groups = {"all": np.ones(n, bool)}
+    if env.spec.kind == "pickup":
+        air = state[:, 2] > 0.03  # the cube's centre sits at its half size on the table
+        groups = {"held_in_air": air, "on_table": ~air}
+    out = {"robot_threshold": float(seg.robot_threshold)}
+    for th in (float(seg.robot_threshold),) + SWEEP:
+        fg, robot, obj = map(np.asarray, pipeline.masks(
+            seg.replace(robot_threshold=jnp.float32(th)), jnp.asarray(rgb)))
+        row = {g: _scores(obj[m], robot[m], fg[m], labels[m]) for g, m in groups.items() if m.any()}
+        if th == float(seg.robot_threshold) and "at_threshold" not in out:
+            out["at_threshold"] = row
+        else:
+            out.setdefault("sweep", {})[str(th)] = row
+    return out
+
+
+def goal_swap(task: str, ckpt: str, seeds: list[int], n: int) -> dict:
+    import envs_mjx
+    from roll_jax import analysis as A
+
+    cfg, pre, seg = A.load_checkpoint(ckpt, task)
+    env = envs_mjx.make(task)
+    _, encode_object = A.model_encoders(cfg, pre, seg)
+    sets = {s: A.observation_set(env, jax.random.PRNGKey(s), n) for s in seeds}
+    goal_state = {s: np.asarray(env.object_state(env.sample_goal(
+        jax.random.split(jax.random.PRNGKey(s))[0]))) for s in seeds}
+    codes = {s: np.asarray(encode_object(sets[s].rgb), np.float64) for s in seeds}
+    all_codes = np.concatenate([codes[s] for s in seeds])
+    all_states = np.concatenate([sets[s].states for s in seeds])
+    whole = np.concatenate([A.object_visibility(sets[s].labels) >= A.WHOLE_SHARE for s in seeds])
+
+    def dist(states, goal):
+        d = states - goal
+        return np.abs(d[:, 0]) if env.spec.kind == "door" else np.linalg.norm(d, axis=-1)
+
+    out = {"goal_state": {str(s): goal_state[s].round(4).tolist() for s in seeds},
+           "swap": {}, "near_mean_goal_code": {}}
+    for g in seeds:
+        zg = np.asarray(encode_object(sets[g].goal_rgb[None]), np.float64)[0]
+        near = (dist(all_states, goal_state[g]) < NEAR_M) & whole
+        zn = all_codes[near].mean(0)
+        out["near_mean_goal_code"][str(g)] = {
+            "n_near": int(near.sum()), "goal_code_offset": round(float(np.linalg.norm(zg - zn)), 4),
+            "near_code_spread": round(float(np.linalg.norm(all_codes[near] - zn, axis=1).mean()), 4),
+            "spearman_object": round(A.spearman(sets[g].distances,
+                                                np.linalg.norm(codes[g] - zn, axis=1)), 4)}
+        for s in seeds:
+            d = dist(sets[s].states, goal_state[g])
+            out["swap"][f"obs{s}_goal{g}"] = round(
+                A.spearman(d, np.linalg.norm(codes[s] - zg, axis=1)), 4)
+    return out
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--task", required=True)
+    p.add_argument("--seg", help="segmentation checkpoint dir (default: CKPT/segmentation)")
+    p.add_argument("--ckpt", help="pretrain --out dir: also the goal-swap table")
+    p.add_argument("--n", type=int, default=128, help="goal images to segment")
+    p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    p.add_argument("--n-obs", type=int, default=500)
+    p.add_argument("--name", default=None)
+    a = p.parse_args(argv)
+    if a.seg is None and a.ckpt is None:
+        p.error("give --seg or --ckpt")
+    seg_dir = a.seg or os.path.join(a.ckpt, "segmentation")
+    res = {"task": a.task, "seg": os.path.abspath(seg_dir),
+           "goal_segmentation": goal_segmentation(a.task, seg_dir, a.n, seed=123)}
+    print("goal images at the threshold:", res["goal_segmentation"]["at_threshold"])
+    if a.ckpt:
+        res["ckpt"] = os.path.abspath(a.ckpt)
+        res.update(goal_swap(a.task, a.ckpt, a.seeds, a.n_obs))
+        print("Fig. 5 object Spearman, observation set x goal:", res["swap"])
+        print("with the near-mean goal code:", res["near_mean_goal_code"])
+    write_results(os.path.join(ROOT, "bench", "results",
+                               f"goal_images_{a.name or a.task}.json"), res)
+
+
+if __name__ == "__main__":
+    main()
