@@ -4,9 +4,10 @@ Figure 5 compares N observations with one goal through the object encoding, so a
 whose object is masked badly misplaces the whole ranking. Two measurements:
 
 1. ``--seg DIR``: the segmentation's masks of `--n` goal images (`env.sample_goal`; on pickup
-   split into goals held in the air and goals on the table) against the renderer's labels:
-   IoU, the share of object pixels the background model keeps and the U-Net calls robot, robot
-   leakage, at the checkpoint's robot threshold and over a threshold sweep.
+   split into goals held in the air and goals on the table) against the renderer's labels,
+   scored as the segmentation's evaluation scores random states (`pipeline.score`: IoU, robot
+   leakage, a threshold sweep), and the shares of object pixels that the background model
+   keeps and that the U-Net calls robot.
 2. ``--ckpt DIR`` (a `roll_jax.pretrain --out` directory with its segmentation): Fig. 5's
    object Spearman of every analysis seed's observation set against every seed's goal image
    (`--seeds`), which tells a goal that ranks badly from an observation set that does; and the
@@ -24,7 +25,6 @@ import os
 import sys
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -32,18 +32,7 @@ sys.path.insert(0, ROOT)
 
 from bench.common import write_results  # noqa: E402
 
-SWEEP = (0.1, 0.2, 0.3, 0.4, 0.5, 0.7)
 NEAR_M = 0.03
-
-
-def _scores(obj, robot, fg, labels) -> dict:
-    true, arm = labels == 2, labels == 1
-    iou = (obj & true).sum((1, 2)) / np.maximum((obj | true).sum((1, 2)), 1)
-    return {"n": int(len(labels)), "object_pixels_mean": round(float(true.sum((1, 2)).mean()), 2),
-            "iou": round(float(iou.mean()), 4),
-            "foreground_keeps_object": round(float((fg & true).sum() / max(true.sum(), 1)), 4),
-            "unet_calls_object_robot": round(float((robot & true).sum() / max(true.sum(), 1)), 4),
-            "robot_leakage": round(float((obj & arm).sum() / max(arm.sum(), 1)), 4)}
 
 
 def goal_segmentation(task: str, seg_dir: str, n: int, seed: int) -> dict:
@@ -66,15 +55,19 @@ def goal_segmentation(task: str, seg_dir: str, n: int, seed: int) -> dict:
     if env.spec.kind == "pickup":
         air = state[:, 2] > 0.03  # the cube's centre sits at its half size on the table
         groups = {"held_in_air": air, "on_table": ~air}
-    out = {"robot_threshold": float(seg.robot_threshold)}
-    for th in (float(seg.robot_threshold),) + SWEEP:
-        fg, robot, obj = map(np.asarray, pipeline.masks(
-            seg.replace(robot_threshold=jnp.float32(th)), jnp.asarray(rgb)))
-        row = {g: _scores(obj[m], robot[m], fg[m], labels[m]) for g, m in groups.items() if m.any()}
-        if th == float(seg.robot_threshold) and "at_threshold" not in out:
-            out["at_threshold"] = row
-        else:
-            out.setdefault("sweep", {})[str(th)] = row
+    out = {}
+    for name, m in groups.items():
+        if not m.any():
+            continue
+        # the segmentation evaluation's scores, with its threshold sweep, on these images;
+        # besides, which stage loses the object's pixels (pooled over the images)
+        summary, arrays = pipeline.score(seg, rgb[m], labels[m])
+        true = arrays["labels"] == 2
+        out[name] = {**summary,
+                     "foreground_keeps_object": float((arrays["foreground"] & true).sum()
+                                                      / max(true.sum(), 1)),
+                     "unet_calls_object_robot": float((arrays["robot"] & true).sum()
+                                                      / max(true.sum(), 1))}
     return out
 
 
@@ -86,22 +79,16 @@ def goal_swap(task: str, ckpt: str, seeds: list[int], n: int) -> dict:
     env = envs_mjx.make(task)
     _, encode_object = A.model_encoders(cfg, pre, seg)
     sets = {s: A.observation_set(env, jax.random.PRNGKey(s), n) for s in seeds}
-    goal_state = {s: np.asarray(env.object_state(env.sample_goal(
-        jax.random.split(jax.random.PRNGKey(s))[0]))) for s in seeds}
     codes = {s: np.asarray(encode_object(sets[s].rgb), np.float64) for s in seeds}
     all_codes = np.concatenate([codes[s] for s in seeds])
     all_states = np.concatenate([sets[s].states for s in seeds])
     whole = np.concatenate([A.object_visibility(sets[s].labels) >= A.WHOLE_SHARE for s in seeds])
 
-    def dist(states, goal):
-        d = states - goal
-        return np.abs(d[:, 0]) if env.spec.kind == "door" else np.linalg.norm(d, axis=-1)
-
-    out = {"goal_state": {str(s): goal_state[s].round(4).tolist() for s in seeds},
+    out = {"goal_state": {str(s): sets[s].goal_state.round(4).tolist() for s in seeds},
            "swap": {}, "near_mean_goal_code": {}}
     for g in seeds:
         zg = np.asarray(encode_object(sets[g].goal_rgb[None]), np.float64)[0]
-        near = (dist(all_states, goal_state[g]) < NEAR_M) & whole
+        near = (np.asarray(env.object_distance(all_states, sets[g].goal_state)) < NEAR_M) & whole
         zn = all_codes[near].mean(0)
         out["near_mean_goal_code"][str(g)] = {
             "n_near": int(near.sum()), "goal_code_offset": round(float(np.linalg.norm(zg - zn)), 4),
@@ -109,7 +96,7 @@ def goal_swap(task: str, ckpt: str, seeds: list[int], n: int) -> dict:
             "spearman_object": round(A.spearman(sets[g].distances,
                                                 np.linalg.norm(codes[g] - zn, axis=1)), 4)}
         for s in seeds:
-            d = dist(sets[s].states, goal_state[g])
+            d = np.asarray(env.object_distance(sets[s].states, sets[g].goal_state))
             out["swap"][f"obs{s}_goal{g}"] = round(
                 A.spearman(d, np.linalg.norm(codes[s] - zg, axis=1)), 4)
     return out
@@ -131,7 +118,8 @@ def main(argv=None):
     seg_dir = a.seg or os.path.join(a.ckpt, "segmentation")
     res = {"task": a.task, "seg": os.path.abspath(seg_dir),
            "goal_segmentation": goal_segmentation(a.task, seg_dir, a.n, seed=123)}
-    print("goal images at the threshold:", res["goal_segmentation"]["at_threshold"])
+    print("goal images:", {g: {k: v for k, v in r.items() if k != "threshold_sweep"}
+                           for g, r in res["goal_segmentation"].items()})
     if a.ckpt:
         res["ckpt"] = os.path.abspath(a.ckpt)
         res.update(goal_swap(a.task, a.ckpt, a.seeds, a.n_obs))

@@ -265,10 +265,14 @@ class Env:
 
     def goal_distance(self, state: EnvState, goal: EnvState):
         """The paper's metric: |angle - goal| (door) or the object's position error (m)."""
-        diff = self.object_state(state) - self.object_state(goal)
+        return self.object_distance(self.object_state(state), self.object_state(goal))
+
+    def object_distance(self, obj, goal_obj):
+        """`goal_distance` of object states [..., k] (`object_state`'s) -> [...]."""
+        diff = obj - goal_obj
         if self.spec.kind == "door":
-            return jnp.abs(diff[0])
-        return jnp.linalg.norm(diff)
+            return jnp.abs(diff[..., 0])
+        return jnp.linalg.norm(diff, axis=-1)
 
     @property
     def kind(self) -> str:

@@ -129,6 +129,7 @@ class ObservationSet:
     states: np.ndarray  # [n, k] env.object_state
     labels: np.ndarray  # int32 [n, 48, 48]
     goal_labels: np.ndarray  # int32 [48, 48]
+    goal_state: np.ndarray  # [k] env.object_state of the goal
 
 
 def observation_set(env, key, n: int) -> ObservationSet:
@@ -147,7 +148,7 @@ def observation_set(env, key, n: int) -> ObservationSet:
 
         rgb, labels, dist, pos = jax.vmap(one)(keys)
         goal_rgb, goal_labels = env.render_both(goal)
-        return rgb, goal_rgb, dist, pos, labels, goal_labels
+        return rgb, goal_rgb, dist, pos, labels, goal_labels, env.object_state(goal)
 
     return ObservationSet(*map(np.asarray, run(k_goal, jax.random.split(k_obs, n))))
 

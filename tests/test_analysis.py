@@ -100,7 +100,7 @@ def test_pixel_reference_ranks_visible_discs_and_counts_hidden_ones():
     obs = analysis.ObservationSet(
         rgb=np.zeros((n, 48, 48, 3), np.uint8), goal_rgb=np.zeros((48, 48, 3), np.uint8),
         distances=np.linalg.norm(pos - goal, axis=-1), states=pos, labels=labels,
-        goal_labels=_disc_labels(goal[None])[0])
+        goal_labels=_disc_labels(goal[None])[0], goal_state=goal)
     ref = analysis.pixel_reference(obs)
     assert ref["reference_spearman_object"] > 0.98
     assert ref["reference_r2"] > 0.99 and ref["reference_pairwise_spearman"] > 0.98
@@ -131,7 +131,8 @@ def test_goal_mask_scores_compare_the_goal_mask_with_its_labels():
     labels[30:34, 5:10] = 1  # 20 robot pixels
     obs = analysis.ObservationSet(
         rgb=np.zeros((1, 48, 48, 3), np.uint8), goal_rgb=np.full((48, 48, 3), 90, np.uint8),
-        distances=np.zeros(1), states=np.zeros((1, 2)), labels=labels[None], goal_labels=labels)
+        distances=np.zeros(1), states=np.zeros((1, 2)), labels=labels[None], goal_labels=labels,
+        goal_state=np.zeros(2))
     everything = analysis.goal_mask_scores(seg.replace(robot_threshold=np.float32(2.0)), obs)
     assert everything == {"goal_object_pixels": 16, "goal_mask_iou": round(16 / 48 ** 2, 4),
                           "goal_mask_robot_leakage": 1.0}

@@ -123,6 +123,19 @@ def test_hand_stays_in_its_range_and_state_stays_finite_on_long_random_rollouts(
                        if jnp.issubdtype(x.dtype, jnp.floating)), task
 
 
+def test_goal_distance_is_the_object_distance_of_the_object_states():
+    push, door = env_of("puck_push"), env_of("door_open")
+    s0 = reset_fn("puck_push")(jax.random.PRNGKey(0))
+    goal = place_fn("puck_push")(jnp.array(push.spec.hand_reset), jnp.array([0.03, 0.64]))
+    want = np.linalg.norm(np.asarray(push.object_state(s0)) - [0.03, 0.64])
+    assert float(push.goal_distance(s0, goal)) == pytest.approx(want, abs=1e-6)
+    # batched object states: one distance per row; the door compares angles only
+    np.testing.assert_allclose(push.object_distance(jnp.array([[3.0, 4.0], [0.0, 1.0]]),
+                                                    jnp.zeros(2)), [5.0, 1.0])
+    np.testing.assert_allclose(door.object_distance(jnp.array([[0.5], [0.1]]),
+                                                    jnp.array([0.2])), [0.3, 0.1], rtol=1e-6)
+
+
 def test_pulling_the_hook_opens_the_door():
     s0 = reset_fn("door_open")(jax.random.PRNGKey(0))
     _, traj = run("door_open", s0, SCRIPTS["door_open"](T))

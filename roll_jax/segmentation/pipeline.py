@@ -255,21 +255,25 @@ def _probabilities(params: SegParams, rgb):
 
 
 def evaluate(env, params: SegParams, key, n_states: int) -> tuple[dict, dict]:
-    """Scores over `n_states` random states whose object is visible; (summary, arrays).
-
-    The summary is for the params' robot threshold; `threshold_sweep` repeats the scores for
-    other thresholds (same U-Net probabilities), the data for choosing a task's threshold."""
+    """`score` over `n_states` random states whose object is visible; (summary, arrays)."""
     rgb, labels = random_object_states(env, key, int(n_states * 1.5) + 8)
     rgb, labels = np.asarray(rgb), np.asarray(labels)
     visible = (labels == 2).sum((-2, -1)) > 0
-    rgb, labels = rgb[visible][:n_states], labels[visible][:n_states]
+    summary, arrays = score(params, rgb[visible][:n_states], labels[visible][:n_states])
+    return {"task": env.name, **summary}, arrays
 
+
+def score(params: SegParams, rgb, labels) -> tuple[dict, dict]:
+    """The masks of uint8 images rgb [n, H, W, 3] against their labels [n, H, W]; (summary,
+    arrays). The summary is for the params' robot threshold; `threshold_sweep` repeats the
+    scores for other thresholds (same U-Net probabilities), the data for choosing a task's
+    threshold."""
+    rgb, labels = np.asarray(rgb), np.asarray(labels)
     fg, prob = (np.asarray(a) for a in _probabilities(params, jnp.asarray(rgb)))
     robot = prob > float(params.robot_threshold)
     obj = fg & ~robot
     summary, scores = _summary(obj, labels)
-    summary = {"task": env.name, "n_states": len(rgb),
-               "robot_threshold": float(params.robot_threshold), **summary,
+    summary = {"n_states": len(rgb), "robot_threshold": float(params.robot_threshold), **summary,
                "object_pixels_mean": float((labels == 2).sum((-2, -1)).mean()),
                "threshold_sweep": {f"{t:.1f}": _summary(fg & ~(prob > t), labels)[0]
                                    for t in THRESHOLD_SWEEP}}
