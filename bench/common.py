@@ -1,9 +1,14 @@
-"""What the benchmarks share: timing a jitted function, writing a results JSON."""
+"""What the benchmarks share: timing a jitted function, running a CLI in its own process,
+writing a results JSON."""
 from __future__ import annotations
 
 import json
 import os
+import subprocess
+import sys
 import time
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def cpu_model() -> str:
@@ -17,6 +22,23 @@ def cpu_model() -> str:
     except OSError:
         pass
     return ""
+
+
+def run_module(args: list[str]) -> tuple[float, str]:
+    """`python -m ARGS` in its own process, in the repository root -> (wall seconds, stdout);
+    stops with its stderr's tail if it fails."""
+    t0 = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-m", *args], cwd=REPO, capture_output=True,
+                          text=True)
+    if proc.returncode:
+        raise SystemExit(f"{' '.join(args)} failed:\n{proc.stderr[-3000:]}")
+    return time.perf_counter() - t0, proc.stdout
+
+
+def last_json(text: str) -> dict:
+    """The JSON object a CLI printed last (its summary)."""
+    start = text.rfind("\n{")
+    return json.loads(text[start + 1 if start >= 0 else 0:])
 
 
 def write_results(path: str, res: dict) -> None:

@@ -19,31 +19,14 @@ import argparse
 import json
 import os
 import shutil
-import subprocess
 import sys
-import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
-from bench.common import cpu_model  # noqa: E402
+from bench.common import cpu_model, last_json, run_module  # noqa: E402
 
 RESULTS = os.path.join(ROOT, "bench", "results", "encoders_cpu.json")
-
-
-def _run(args: list[str]) -> tuple[float, str]:
-    t0 = time.perf_counter()
-    proc = subprocess.run([sys.executable, "-m", *args], cwd=ROOT, capture_output=True,
-                          text=True)
-    if proc.returncode:
-        raise SystemExit(f"{' '.join(args)} failed:\n{proc.stderr[-3000:]}")
-    return time.perf_counter() - t0, proc.stdout
-
-
-def _last_json(text: str) -> dict:
-    """The JSON object a CLI printed last (its summary)."""
-    start = text.rfind("\n{")
-    return json.loads(text[start + 1 if start >= 0 else 0:])
 
 
 def main(argv=None) -> None:
@@ -60,16 +43,16 @@ def main(argv=None) -> None:
             rows = json.load(f)
     for task in a.tasks:
         d = os.path.join(a.out, task)
-        t_seg, out = _run(["roll_jax.segmentation", "--task", task, "--preset", "cpu",
+        t_seg, out = run_module(["roll_jax.segmentation", "--task", task, "--preset", "cpu",
                            "--out", os.path.join(d, "seg")])
-        seg = _last_json(out)
-        t_pre, _ = _run(["roll_jax.pretrain", "--task", task, "--preset", "cpu",
+        seg = last_json(out)
+        t_pre, _ = run_module(["roll_jax.pretrain", "--task", task, "--preset", "cpu",
                          "--seg", os.path.join(d, "seg", "ckpt"), "--out", d])
         shutil.copytree(os.path.join(d, "seg", "ckpt"), os.path.join(d, "segmentation"),
                         dirs_exist_ok=True)
-        t_an, out = _run(["roll_jax.analysis", "latent-vs-distance", "--task", task,
+        t_an, out = run_module(["roll_jax.analysis", "latent-vs-distance", "--task", task,
                           "--ckpt", d, "--seed", str(a.seed)])
-        res = _last_json(out)
+        res = last_json(out)
         row = {"task": task, "preset": "cpu", "seed": a.seed, "cpu_model": cpu_model(),
                "segmentation_s": round(t_seg, 1), "pretrain_s": round(t_pre, 1),
                "analysis_s": round(t_an, 1),
