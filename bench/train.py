@@ -171,13 +171,15 @@ def _sac_share(with_sac: float, without_sac: float, n_updates: int) -> dict:
             "chunk_over_sac": with_sac / sac_s if sac_s > 0 else float("inf")}
 
 
-def sac_share_in_chunk(task: str, preset: str, first_epoch: int = 20, seeds: int = 1) -> dict:
-    """The chunk `train.py --preset PRESET` compiles (the preset's replay size and schedules),
+def sac_share_in_chunk(task: str, preset: str, first_epoch: int = 20, seeds: int = 1,
+                       replay_size: int | None = None) -> dict:
+    """The chunk `train.py --preset PRESET` compiles (the preset's replay size unless given,
+    and its schedules),
     timed over one refresh cycle of steady-state plans (epochs `first_epoch` onwards: LSTM
     rounds, cached-latent refreshes as a run has them) with the plans' SAC on and off: the
     difference is the cost of the SAC updates inside the chunk (HER sampling, prior goals,
     gathers included)."""
-    a = argparse.Namespace(task=task, preset=preset, replay_size=None, chunks=1,
+    a = argparse.Namespace(task=task, preset=preset, replay_size=replay_size, chunks=1,
                            n_envs=None, epoch_env_steps=None)
     base = make_config(task, "roll", preset)
     a.n_envs, a.epoch_env_steps = base.n_envs, base.epoch_env_steps
