@@ -45,7 +45,8 @@ def main(argv=None) -> None:
     p.add_argument("--runs", nargs="+", type=_pair, required=True, metavar="SEED:N")
     p.add_argument("--ckpt", nargs="*", default=[], metavar="TASK=DIR",
                    help="a task's encoder dir instead of the committed preset's")
-    p.add_argument("--out", default=os.path.join(ROOT, "runs", "fig5_sweep"))
+    p.add_argument("--out", default=os.path.join(ROOT, "runs", "fig5_sweep"),
+                   help="the analysis outputs, one folder per checkpoint, seed and n")
     a = p.parse_args(argv)
     ckpts = dict(CKPTS)
     for item in a.ckpt:
@@ -64,7 +65,8 @@ def main(argv=None) -> None:
         for seed, n in a.runs:
             args = ["roll_jax.analysis", "latent-vs-distance", "--task", task, "--ckpt",
                     ckpts[task], "--seed", str(seed), "--n", str(n),
-                    "--out", os.path.join(a.out, task, f"seed{seed}_n{n}")]
+                    "--out", os.path.join(a.out, ckpts[task].strip(os.sep).replace(os.sep, "_"),
+                                          f"seed{seed}_n{n}")]
             seconds, out = run_module(args)
             figures = {k: v for k, v in last_json(out).items()
                        if isinstance(v, (int, float)) and not isinstance(v, bool)}

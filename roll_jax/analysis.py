@@ -690,11 +690,15 @@ def run_latent_vs_distance(task: str, ckpt: str, out: str, n: int = 500, seed: i
              "scene_vae_r2": position_r2(scene, pos),
              "scene_vae_latent_std": [round(float(v), 4) for v in np.std(scene, 0)]}
     # The same statistics on the observations that show the whole object, beside the
-    # perfect-segmentation yardstick on all of them.
-    whole = object_visibility(obs_set.labels) >= WHOLE_SHARE
+    # perfect-segmentation yardstick on all of them; Fig. 5 also without the observations
+    # where the object is hidden (no single image locates it there).
+    vis = object_visibility(obs_set.labels)
+    whole, shown = vis >= WHOLE_SHARE, vis >= HIDDEN_SHARE
     probe.update(pixel_reference(obs_set))
     probe.update(goal_mask_scores(seg, obs_set))
-    probe.update({"whole_object_spearman_object": spearman(dist[whole],
+    probe.update({"shown_object_spearman_object": spearman(dist[shown],
+                                                           res["object_latent_distance"][shown]),
+                  "whole_object_spearman_object": spearman(dist[whole],
                                                            res["object_latent_distance"][whole]),
                   "whole_object_vae_r2": position_r2(means[whole], pos[whole]),
                   "whole_object_vae_pairwise_spearman": pairwise_spearman(means[whole],
