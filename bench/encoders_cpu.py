@@ -44,14 +44,14 @@ def main(argv=None) -> None:
     for task in a.tasks:
         d = os.path.join(a.out, task)
         t_seg, out = run_module(["roll_jax.segmentation", "--task", task, "--preset", "cpu",
-                           "--out", os.path.join(d, "seg")])
+                                 "--out", os.path.join(d, "seg")])
         seg = last_json(out)
         t_pre, _ = run_module(["roll_jax.pretrain", "--task", task, "--preset", "cpu",
-                         "--seg", os.path.join(d, "seg", "ckpt"), "--out", d])
+                               "--seg", os.path.join(d, "seg", "ckpt"), "--out", d])
         shutil.copytree(os.path.join(d, "seg", "ckpt"), os.path.join(d, "segmentation"),
                         dirs_exist_ok=True)
         t_an, out = run_module(["roll_jax.analysis", "latent-vs-distance", "--task", task,
-                          "--ckpt", d, "--seed", str(a.seed)])
+                                "--ckpt", d, "--seed", str(a.seed)])
         res = last_json(out)
         row = {"task": task, "preset": "cpu", "seed": a.seed, "cpu_model": cpu_model(),
                "segmentation_s": round(t_seg, 1), "pretrain_s": round(t_pre, 1),

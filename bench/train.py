@@ -173,12 +173,11 @@ def _sac_share(with_sac: float, without_sac: float, n_updates: int) -> dict:
 
 def sac_share_in_chunk(task: str, preset: str, first_epoch: int = 20, seeds: int = 1,
                        replay_size: int | None = None) -> dict:
-    """The chunk `train.py --preset PRESET` compiles (the preset's replay size unless given,
-    and its schedules),
-    timed over one refresh cycle of steady-state plans (epochs `first_epoch` onwards: LSTM
-    rounds, cached-latent refreshes as a run has them) with the plans' SAC on and off: the
-    difference is the cost of the SAC updates inside the chunk (HER sampling, prior goals,
-    gathers included)."""
+    """The chunk `train.py --preset PRESET` compiles (its schedules; its replay size unless
+    `replay_size` is given), timed over one refresh cycle of steady-state plans (epochs
+    `first_epoch` onwards: LSTM rounds, cached-latent refreshes as a run has them) with the
+    plans' SAC on and off: the difference is the cost of the SAC updates inside the chunk (HER
+    sampling, prior goals, gathers included)."""
     a = argparse.Namespace(task=task, preset=preset, replay_size=replay_size, chunks=1,
                            n_envs=None, epoch_env_steps=None)
     base = make_config(task, "roll", preset)
