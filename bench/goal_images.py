@@ -1,7 +1,7 @@
 """How a task's goal images are segmented and how much Fig. 5 depends on the one goal image.
 
 Figure 5 compares N observations with one goal through the object encoding, so a goal image
-whose object is masked badly misplaces the whole ranking. Two measurements:
+whose object is masked badly misplaces the whole ranking. Three measurements:
 
 1. ``--seg DIR``: the segmentation's masks of `--n` goal images (`env.sample_goal`; on pickup
    split into goals held in the air and goals on the table) against the renderer's labels,
@@ -13,6 +13,10 @@ whose object is masked badly misplaces the whole ranking. Two measurements:
    (`--seeds`), which tells a goal that ranks badly from an observation set that does; and the
    same with each goal's code replaced by the mean code of the observations that show the whole
    object within 3 cm of the goal (what the goal image "should" encode).
+
+3. ``--goal-sweep K`` (with ``--ckpt``): Fig. 5 of the first seed's observation set against K
+   goals from `env.sample_goal`, with each goal's offset from the goal space's centre: whether
+   the ranking depends on where the goal lies.
 
     python bench/goal_images.py --task pickup --seg runs/enc/pickup/segmentation \\
         [--ckpt runs/enc/pickup] [--name NAME]   # bench/results/goal_images_NAME.json
@@ -102,6 +106,57 @@ def goal_swap(task: str, ckpt: str, seeds: list[int], n: int) -> dict:
     return out
 
 
+def goal_position_sweep(task: str, ckpt: str, seed: int, n_obs: int, n_goals: int) -> dict:
+    """Fig. 5's object Spearman of one observation set (analysis seed `seed`) against
+    `n_goals` goals drawn by `env.sample_goal`: how the ranking depends on where the goal lies
+    in the goal space (its offset from the centre, per axis over the half-extent, the largest
+    axis), on all observations and on those that show the object."""
+    import envs_mjx
+    from roll_jax import analysis as A
+
+    cfg, pre, seg = A.load_checkpoint(ckpt, task)
+    env = envs_mjx.make(task)
+    _, encode_object = A.model_encoders(cfg, pre, seg)
+    obs = A.observation_set(env, jax.random.PRNGKey(seed), n_obs)
+    codes = np.asarray(encode_object(obs.rgb), np.float64)
+    shown = A.object_visibility(obs.labels) >= A.HIDDEN_SHARE
+
+    @jax.jit
+    def goals(keys):
+        def one(k):
+            g = env.sample_goal(k)
+            return env.render(g), env.object_state(g)
+        return jax.vmap(one)(keys)
+
+    rgb, states = map(np.asarray, goals(jax.random.split(jax.random.PRNGKey(10_000 + seed),
+                                                         n_goals)))
+    zg = np.asarray(encode_object(rgb), np.float64)
+    lo, hi = (np.asarray(v, np.float64) for v in (env.spec.object_goal_low,
+                                                  env.spec.object_goal_high))
+    k = len(lo)
+    offset = np.max(np.abs(states[:, :k] - (lo + hi) / 2) / ((hi - lo) / 2), axis=1)
+    rows = []
+    for g in range(n_goals):
+        d = np.asarray(env.object_distance(obs.states, states[g]))
+        z = np.linalg.norm(codes - zg[g], axis=1)
+        rows.append({"goal_state": states[g].round(4).tolist(), "offset": round(float(offset[g]), 3),
+                     "spearman_object": round(A.spearman(d, z), 4),
+                     "shown_spearman_object": round(A.spearman(d[shown], z[shown]), 4)})
+    fig5 = np.array([r["spearman_object"] for r in rows])
+    shown_fig5 = np.array([r["shown_spearman_object"] for r in rows])
+    middle = offset < 0.5
+    return {"observation_seed": seed, "n_goals": n_goals, "goals": rows,
+            "spearman_offset_vs_fig5": round(A.spearman(offset, fig5), 4),
+            "fig5_goals_in_middle_half": [round(float(np.min(fig5[middle])), 4),
+                                          round(float(np.median(fig5[middle])), 4)]
+            if middle.any() else None,
+            "fig5_goals_in_outer_half": [round(float(np.min(fig5[~middle])), 4),
+                                         round(float(np.median(fig5[~middle])), 4)]
+            if (~middle).any() else None,
+            "shown_fig5_min_median": [round(float(shown_fig5.min()), 4),
+                                      round(float(np.median(shown_fig5)), 4)]}
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -112,9 +167,14 @@ def main(argv=None):
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     p.add_argument("--n-obs", type=int, default=500)
     p.add_argument("--name", default=None)
+    p.add_argument("--goal-sweep", type=int, default=0, metavar="K",
+                   help="with --ckpt: Fig. 5 of the first seed's observations against K goals")
     a = p.parse_args(argv)
     if a.seg is None and a.ckpt is None:
         p.error("give --seg or --ckpt")
+    if a.goal_sweep < 0 or (a.goal_sweep and not a.ckpt):
+        p.error(f"--goal-sweep wants a count >= 1 and --ckpt, got {a.goal_sweep}"
+                + ("" if a.ckpt else " without --ckpt"))
     seg_dir = a.seg or os.path.join(a.ckpt, "segmentation")
     res = {"task": a.task, "seg": os.path.abspath(seg_dir),
            "goal_segmentation": goal_segmentation(a.task, seg_dir, a.n, seed=123)}
@@ -125,6 +185,11 @@ def main(argv=None):
         res.update(goal_swap(a.task, a.ckpt, a.seeds, a.n_obs))
         print("Fig. 5 object Spearman, observation set x goal:", res["swap"])
         print("with the near-mean goal code:", res["near_mean_goal_code"])
+        if a.goal_sweep:
+            res["goal_position_sweep"] = goal_position_sweep(a.task, a.ckpt, a.seeds[0],
+                                                             a.n_obs, a.goal_sweep)
+            print("goal position sweep:", {k: v for k, v in res["goal_position_sweep"].items()
+                                           if k != "goals"})
     write_results(os.path.join(ROOT, "bench", "results",
                                f"goal_images_{a.name or a.task}.json"), res)
 
