@@ -110,9 +110,10 @@ def goal_position_sweep(task: str, ckpt: str, seed: int, n_obs: int, n_goals: in
     """Fig. 5's object Spearman of one observation set (analysis seed `seed`) against
     `n_goals` goals drawn by `env.sample_goal`: how the ranking depends on where the goal lies
     in the goal space (its offset from the centre, per axis over the half-extent, the largest
-    axis), on all observations and on those that show the object."""
+    over the axes the space spans), on all observations and on those that show the object."""
     import envs_mjx
     from roll_jax import analysis as A
+    from roll_jax.segmentation import pipeline
 
     cfg, pre, seg = A.load_checkpoint(ckpt, task)
     env = envs_mjx.make(task)
@@ -125,21 +126,26 @@ def goal_position_sweep(task: str, ckpt: str, seed: int, n_obs: int, n_goals: in
     def goals(keys):
         def one(k):
             g = env.sample_goal(k)
-            return env.render(g), env.object_state(g)
+            rgb, labels = env.render_both(g)
+            return rgb, labels, env.object_state(g)
         return jax.vmap(one)(keys)
 
-    rgb, states = map(np.asarray, goals(jax.random.split(jax.random.PRNGKey(10_000 + seed),
-                                                         n_goals)))
+    rgb, labels, states = map(np.asarray, goals(
+        jax.random.split(jax.random.PRNGKey(10_000 + seed), n_goals)))
     zg = np.asarray(encode_object(rgb), np.float64)
+    masks = pipeline.mask_scores(pipeline.segment(seg, rgb), labels)
     lo, hi = (np.asarray(v, np.float64) for v in (env.spec.object_goal_low,
                                                   env.spec.object_goal_high))
-    k = len(lo)
-    offset = np.max(np.abs(states[:, :k] - (lo + hi) / 2) / ((hi - lo) / 2), axis=1)
+    span = hi > lo  # (pickup's goal space is a plane: x is fixed)
+    offset = np.max(np.abs(states[:, :len(lo)] - (lo + hi) / 2)[:, span]
+                    / ((hi - lo) / 2)[span], axis=1)
     rows = []
     for g in range(n_goals):
         d = np.asarray(env.object_distance(obs.states, states[g]))
         z = np.linalg.norm(codes - zg[g], axis=1)
         rows.append({"goal_state": states[g].round(4).tolist(), "offset": round(float(offset[g]), 3),
+                     "goal_object_pixels": int((labels[g] == 2).sum()),
+                     "goal_mask_iou": round(float(masks["iou"][g]), 4),
                      "spearman_object": round(A.spearman(d, z), 4),
                      "shown_spearman_object": round(A.spearman(d[shown], z[shown]), 4)})
     fig5 = np.array([r["spearman_object"] for r in rows])
