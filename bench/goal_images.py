@@ -39,13 +39,8 @@ from bench.common import write_results  # noqa: E402
 NEAR_M = 0.03
 
 
-def goal_segmentation(task: str, seg_dir: str, n: int, seed: int) -> dict:
-    import envs_mjx
-    from roll_jax.segmentation import pipeline
-
-    seg, _ = pipeline.load(seg_dir, task)
-    env = envs_mjx.make(task)
-
+def sampled_goals(env, key, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`n` goals from `env.sample_goal` -> (rgb, renderer labels, object states), numpy."""
     @jax.jit
     def goals(keys):
         def one(k):
@@ -54,7 +49,17 @@ def goal_segmentation(task: str, seg_dir: str, n: int, seed: int) -> dict:
             return rgb, labels, env.object_state(g)
         return jax.vmap(one)(keys)
 
-    rgb, labels, state = map(np.asarray, goals(jax.random.split(jax.random.PRNGKey(seed), n)))
+    return tuple(map(np.asarray, goals(jax.random.split(key, n))))
+
+
+def goal_segmentation(task: str, seg_dir: str, n: int, seed: int) -> dict:
+    import envs_mjx
+    from roll_jax.segmentation import pipeline
+
+    seg, _ = pipeline.load(seg_dir, task)
+    env = envs_mjx.make(task)
+
+    rgb, labels, state = sampled_goals(env, jax.random.PRNGKey(seed), n)
     groups = {"all": np.ones(n, bool)}
     if env.spec.kind == "pickup":
         air = state[:, 2] > 0.03  # the cube's centre sits at its half size on the table
@@ -122,16 +127,7 @@ def goal_position_sweep(task: str, ckpt: str, seed: int, n_obs: int, n_goals: in
     codes = np.asarray(encode_object(obs.rgb), np.float64)
     shown = A.object_visibility(obs.labels) >= A.HIDDEN_SHARE
 
-    @jax.jit
-    def goals(keys):
-        def one(k):
-            g = env.sample_goal(k)
-            rgb, labels = env.render_both(g)
-            return rgb, labels, env.object_state(g)
-        return jax.vmap(one)(keys)
-
-    rgb, labels, states = map(np.asarray, goals(
-        jax.random.split(jax.random.PRNGKey(10_000 + seed), n_goals)))
+    rgb, labels, states = sampled_goals(env, jax.random.PRNGKey(10_000 + seed), n_goals)
     zg = np.asarray(encode_object(rgb), np.float64)
     masks = pipeline.mask_scores(pipeline.segment(seg, rgb), labels)
     lo, hi = (np.asarray(v, np.float64) for v in (env.spec.object_goal_low,
