@@ -27,6 +27,8 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+from collections.abc import Callable
+from typing import NamedTuple
 
 import jax
 import numpy as np
@@ -80,7 +82,17 @@ def goal_segmentation(task: str, seg_dir: str, n: int, seed: int) -> dict:
     return out
 
 
-def goal_swap(task: str, ckpt: str, seeds: list[int], n: int) -> dict:
+class Observed(NamedTuple):
+    """A checkpoint's object encoder and the observation sets of some analysis seeds, each
+    rendered and encoded once for every table below."""
+    env: object
+    seg: object
+    encode_object: Callable
+    sets: dict  # seed -> analysis.ObservationSet
+    codes: dict  # seed -> object codes [n, d] of that set's observations
+
+
+def observed(task: str, ckpt: str, seeds: list[int], n: int) -> Observed:
     import envs_mjx
     from roll_jax import analysis as A
 
@@ -89,6 +101,14 @@ def goal_swap(task: str, ckpt: str, seeds: list[int], n: int) -> dict:
     _, encode_object = A.model_encoders(cfg, pre, seg)
     sets = {s: A.observation_set(env, jax.random.PRNGKey(s), n) for s in seeds}
     codes = {s: np.asarray(encode_object(sets[s].rgb), np.float64) for s in seeds}
+    return Observed(env, seg, encode_object, sets, codes)
+
+
+def goal_swap(ob: Observed) -> dict:
+    from roll_jax import analysis as A
+
+    env, encode_object, sets, codes = ob.env, ob.encode_object, ob.sets, ob.codes
+    seeds = list(sets)
     all_codes = np.concatenate([codes[s] for s in seeds])
     all_states = np.concatenate([sets[s].states for s in seeds])
     whole = np.concatenate([A.object_visibility(sets[s].labels) >= A.WHOLE_SHARE for s in seeds])
@@ -111,25 +131,24 @@ def goal_swap(task: str, ckpt: str, seeds: list[int], n: int) -> dict:
     return out
 
 
-def goal_position_sweep(task: str, ckpt: str, seed: int, n_obs: int, n_goals: int) -> dict:
+def _min_median(x) -> list[float] | None:
+    return [round(float(np.min(x)), 4), round(float(np.median(x)), 4)] if len(x) else None
+
+
+def goal_position_sweep(ob: Observed, seed: int, n_goals: int) -> dict:
     """Fig. 5's object Spearman of one observation set (analysis seed `seed`) against
     `n_goals` goals drawn by `env.sample_goal`: how the ranking depends on where the goal lies
     in the goal space (its offset from the centre, per axis over the half-extent, the largest
     over the axes the space spans), on all observations and on those that show the object."""
-    import envs_mjx
     from roll_jax import analysis as A
     from roll_jax.segmentation import pipeline
 
-    cfg, pre, seg = A.load_checkpoint(ckpt, task)
-    env = envs_mjx.make(task)
-    _, encode_object = A.model_encoders(cfg, pre, seg)
-    obs = A.observation_set(env, jax.random.PRNGKey(seed), n_obs)
-    codes = np.asarray(encode_object(obs.rgb), np.float64)
+    env, obs, codes = ob.env, ob.sets[seed], ob.codes[seed]
     shown = A.object_visibility(obs.labels) >= A.HIDDEN_SHARE
 
     rgb, labels, states = sampled_goals(env, jax.random.PRNGKey(10_000 + seed), n_goals)
-    zg = np.asarray(encode_object(rgb), np.float64)
-    masks = pipeline.mask_scores(pipeline.segment(seg, rgb), labels)
+    zg = np.asarray(ob.encode_object(rgb), np.float64)
+    masks = pipeline.mask_scores(pipeline.segment(ob.seg, rgb), labels)
     lo, hi = (np.asarray(v, np.float64) for v in (env.spec.object_goal_low,
                                                   env.spec.object_goal_high))
     span = hi > lo  # (pickup's goal space is a plane: x is fixed)
@@ -145,18 +164,12 @@ def goal_position_sweep(task: str, ckpt: str, seed: int, n_obs: int, n_goals: in
                      "spearman_object": round(A.spearman(d, z), 4),
                      "shown_spearman_object": round(A.spearman(d[shown], z[shown]), 4)})
     fig5 = np.array([r["spearman_object"] for r in rows])
-    shown_fig5 = np.array([r["shown_spearman_object"] for r in rows])
     middle = offset < 0.5
     return {"observation_seed": seed, "n_goals": n_goals, "goals": rows,
             "spearman_offset_vs_fig5": round(A.spearman(offset, fig5), 4),
-            "fig5_goals_in_middle_half": [round(float(np.min(fig5[middle])), 4),
-                                          round(float(np.median(fig5[middle])), 4)]
-            if middle.any() else None,
-            "fig5_goals_in_outer_half": [round(float(np.min(fig5[~middle])), 4),
-                                         round(float(np.median(fig5[~middle])), 4)]
-            if (~middle).any() else None,
-            "shown_fig5_min_median": [round(float(shown_fig5.min()), 4),
-                                      round(float(np.median(shown_fig5)), 4)]}
+            "fig5_goals_in_middle_half": _min_median(fig5[middle]),
+            "fig5_goals_in_outer_half": _min_median(fig5[~middle]),
+            "shown_fig5_min_median": _min_median([r["shown_spearman_object"] for r in rows])}
 
 
 def main(argv=None):
@@ -184,12 +197,12 @@ def main(argv=None):
                            for g, r in res["goal_segmentation"].items()})
     if a.ckpt:
         res["ckpt"] = os.path.abspath(a.ckpt)
-        res.update(goal_swap(a.task, a.ckpt, a.seeds, a.n_obs))
+        ob = observed(a.task, a.ckpt, a.seeds, a.n_obs)
+        res.update(goal_swap(ob))
         print("Fig. 5 object Spearman, observation set x goal:", res["swap"])
         print("with the near-mean goal code:", res["near_mean_goal_code"])
         if a.goal_sweep:
-            res["goal_position_sweep"] = goal_position_sweep(a.task, a.ckpt, a.seeds[0],
-                                                             a.n_obs, a.goal_sweep)
+            res["goal_position_sweep"] = goal_position_sweep(ob, a.seeds[0], a.goal_sweep)
             print("goal position sweep:", {k: v for k, v in res["goal_position_sweep"].items()
                                            if k != "goals"})
     write_results(os.path.join(ROOT, "bench", "results",
