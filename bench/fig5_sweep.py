@@ -61,6 +61,8 @@ def main(argv=None) -> None:
     if os.path.exists(RESULTS):
         with open(RESULTS) as f:
             res = json.load(f)
+    res["command"] = "python -m roll_jax.analysis latent-vs-distance --task T --ckpt DIR --seed S --n N"
+    os.makedirs(os.path.dirname(RESULTS), exist_ok=True)
     for task in a.tasks:
         for seed, n in a.runs:
             args = ["roll_jax.analysis", "latent-vs-distance", "--task", task, "--ckpt",
@@ -74,9 +76,6 @@ def main(argv=None) -> None:
                    "cpu_model": cpu_model(), "seconds": round(seconds, 1), **figures}
             res["rows"] = [r for r in res["rows"] if (r["task"], r["seed"], r["n"], r["ckpt"])
                            != (task, seed, n, ckpts[task])] + [row]
-            res["command"] = ("python -m roll_jax.analysis latent-vs-distance --task T "
-                              "--ckpt DIR --seed S --n N")
-            os.makedirs(os.path.dirname(RESULTS), exist_ok=True)
             with open(RESULTS, "w") as f:
                 json.dump(res, f, indent=2)
             print(json.dumps({k: row[k] for k in ("task", "seed", "n", "seconds",
