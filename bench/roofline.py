@@ -31,8 +31,10 @@ BatchNorm, Adam and the losses are not counted):
 
     python bench/roofline.py [--chunk] [--quick]
     python bench/roofline.py --ab ROUNDS   (the two matmul forms only, interleaved)
+    python bench/roofline.py --unet-ab ROUNDS   (the U-Net's two kernel-gradient forms)
 
-Writes bench/results/roofline.json (--ab: bench/results/conv_forms.json).
+Writes bench/results/roofline.json (--ab: bench/results/conv_forms.json, --unet-ab:
+bench/results/unet_wgrad_order.json).
 """
 from __future__ import annotations
 
@@ -64,6 +66,7 @@ from roll_jax.segmentation import unet
 
 RESULTS = os.path.join(ROOT, "bench", "results", "roofline.json")
 AB_RESULTS = os.path.join(ROOT, "bench", "results", "conv_forms.json")
+UNET_AB_RESULTS = os.path.join(ROOT, "bench", "results", "unet_wgrad_order.json")
 TASK = "puck_push"
 
 
@@ -175,36 +178,43 @@ def bench_vae(cfg, steps: int, peak: float, name: str) -> dict:
     return out
 
 
-def bench_unet(features: int, batch: int, steps: int, peak: float) -> dict:
+def unet_step_timer(features: int, batch: int, steps: int, dot_wgrad: bool):
+    """(timer, state, images) for `steps` U-Net train steps in one jitted `lax.scan`: the timer
+    traces and compiles at its first call, then returns (first call s, best call s)."""
     cfg = SegmentationConfig()
     key = jax.random.PRNGKey(0)
     h = IMAGE_SHAPE[0]
     state = unet.init_unet(key, features, h, h, cfg)
     images = jax.random.randint(key, (steps, batch, h, h, 3), 0, 256).astype(jnp.uint8)
     labels = jax.random.uniform(key, (steps, batch, h, h)) > 0.8
-    macs = unet_macs(state.params, h)
+    model = unet.UNet(features, dot_wgrad=dot_wgrad)
+
+    @jax.jit
+    def run(state):
+        def body(st, xy):
+            x, y = xy
+
+            def loss_fn(p):
+                logits, upd = model.apply({"params": p, "batch_stats": st.batch_stats},
+                                          x.astype(jnp.float32) / 255.0, train=True,
+                                          mutable=["batch_stats"])
+                return unet.bce_loss(logits, y.astype(jnp.float32)), upd["batch_stats"]
+
+            grads, stats = jax.grad(loss_fn, has_aux=True)(st.params)
+            upd, opt = unet.make_optimizer(cfg).update(grads, st.opt_state, st.params)
+            params = jax.tree.map(lambda p, u: p + u, st.params, upd)
+            return st.replace(params=params, batch_stats=stats, opt_state=opt), None
+        return jax.lax.scan(body, state, (images, labels))[0]
+
+    return (lambda: time_best(run, state)), state, images
+
+
+def bench_unet(features: int, batch: int, steps: int, peak: float) -> dict:
     out = {"features": features, "batch": batch}
     for name, dot_wgrad in (("dot_wgrad", True), ("lax", False)):
-        model = unet.UNet(features, dot_wgrad=dot_wgrad)
-
-        @jax.jit
-        def run(state, model=model):
-            def body(st, xy):
-                x, y = xy
-
-                def loss_fn(p):
-                    logits, upd = model.apply({"params": p, "batch_stats": st.batch_stats},
-                                              x.astype(jnp.float32) / 255.0, train=True,
-                                              mutable=["batch_stats"])
-                    return unet.bce_loss(logits, y.astype(jnp.float32)), upd["batch_stats"]
-
-                grads, stats = jax.grad(loss_fn, has_aux=True)(st.params)
-                upd, opt = unet.make_optimizer(cfg).update(grads, st.opt_state, st.params)
-                params = jax.tree.map(lambda p, u: p + u, st.params, upd)
-                return st.replace(params=params, batch_stats=stats, opt_state=opt), None
-            return jax.lax.scan(body, state, (images, labels))[0]
-
-        first, best = time_best(run, state)
+        timer, state, images = unet_step_timer(features, batch, steps, dot_wgrad)
+        first, best = timer()
+        macs = unet_macs(state.params, IMAGE_SHAPE[0])
         out[f"train_{name}"] = _row(f"U-Net f{features} train step ({name})", best / steps,
                                     2.0 * 3 * macs * batch, peak, compile_and_first_call_s=first)
     infer = jax.jit(lambda p, x: jax.lax.map(lambda xb: unet.robot_probability(p, xb), x))
@@ -212,6 +222,44 @@ def bench_unet(features: int, batch: int, steps: int, peak: float) -> dict:
     out["inference"] = _row(f"U-Net f{features} inference", best / steps, 2.0 * macs * batch,
                             peak)
     out["speedup_dot_wgrad_over_lax"] = out["train_lax"]["ms"] / out["train_dot_wgrad"]["ms"]
+    return out
+
+
+def _wgrad_input_major(res, g):
+    """`unet.conv_dot_wgrad`'s backward with each tap's kernel gradient contracted as x^T g
+    (XLA:CPU transposes every tap's input slice), the A/B reference of `unet_wgrad_ab`."""
+    x, kernel = res
+    k, h, w = kernel.shape[0], x.shape[1], x.shape[2]
+    dx = unet._conv(g, jnp.flip(kernel, (0, 1)).swapaxes(2, 3))
+    p = k // 2
+    xp = jnp.pad(x, ((0, 0), (p, p), (p, p), (0, 0)))
+    dk = jnp.stack([jnp.einsum("bhwc,bhwf->cf", xp[:, i:i + h, j:j + w], g)
+                    for i in range(k) for j in range(k)])
+    return dx, dk.reshape(kernel.shape)
+
+
+def unet_wgrad_ab(steps: int, rounds: int) -> dict:
+    """The U-Net train step (widths 8 and 16, batch 32) with the kernel gradient contracted as
+    g^T x (the default) against x^T g, alternating in `rounds` rounds in one process."""
+    out = {}
+    for features in (8, 16):
+        timers = {"g_major": unet_step_timer(features, 32, steps, True)[0]}
+        timers["g_major"]()  # traced and compiled with the default backward
+        unet.conv_dot_wgrad.defvjp(unet._conv_fwd, _wgrad_input_major)
+        try:
+            timers["x_major"] = unet_step_timer(features, 32, steps, True)[0]
+            timers["x_major"]()  # traced now, with the reference backward
+        finally:
+            unet.conv_dot_wgrad.defvjp(unet._conv_fwd, unet._conv_bwd)
+        ms = {name: [] for name in timers}
+        for r in range(rounds):
+            for name in (list(timers) if r % 2 == 0 else list(timers)[::-1]):
+                ms[name].append(1e3 * timers[name]()[1] / steps)
+        med = {name: statistics.median(v) for name, v in ms.items()}
+        out[f"width_{features}"] = {"ms_per_round": ms, "median_ms": med,
+                                    "x_major_over_g_major": med["x_major"] / med["g_major"]}
+        print(f"  U-Net width {features}: g^T x {med['g_major']:.1f} ms, x^T g "
+              f"{med['x_major']:.1f} ms (median of {rounds} interleaved rounds)", flush=True)
     return out
 
 
@@ -289,9 +337,20 @@ def main(argv=None):
     p.add_argument("--ab", type=int, metavar="ROUNDS", default=0,
                    help="only the VAE steps' two matmul forms, interleaved in ROUNDS rounds "
                         "(writes bench/results/conv_forms.json)")
+    p.add_argument("--unet-ab", type=int, metavar="ROUNDS", default=0,
+                   help="only the U-Net train step's two kernel-gradient contractions, "
+                        "interleaved in ROUNDS rounds (writes bench/results/unet_wgrad_order.json)")
     p.add_argument("--out", default=None)
     a = p.parse_args(argv)
     steps = 5 if a.quick else 20
+    if a.unet_ab:
+        res = {"cpu_count": os.cpu_count(), "jax_version": jax.__version__,
+               "load_average_at_start": list(os.getloadavg()),
+               "note": unet_wgrad_ab.__doc__.split("\n\n")[0], "rounds": a.unet_ab,
+               "steps": max(steps // 4, 3)}
+        res.update(unet_wgrad_ab(max(steps // 4, 3), a.unet_ab))
+        write_results(a.out or UNET_AB_RESULTS, res)
+        return
     if a.ab:
         res = {"cpu_count": os.cpu_count(), "jax_version": jax.__version__,
                "load_average_at_start": list(os.getloadavg()), "task_configs": TASK,

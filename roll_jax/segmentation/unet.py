@@ -66,7 +66,10 @@ def _conv_bwd(res, g):
     dx = _conv(g, jnp.flip(kernel, (0, 1)).swapaxes(2, 3))
     p = k // 2
     xp = jnp.pad(x, ((0, 0), (p, p), (p, p), (0, 0)))
-    dk = jnp.stack([jnp.einsum("bhwc,bhwf->cf", xp[:, i:i + h, j:j + w], g)
+    # Contracted as g^T x, not x^T g: XLA:CPU then transposes g once for all k*k taps instead
+    # of each tap's input slice (U-Net train step width 8 / 16: 118 -> 108 / 273 -> 221 ms,
+    # docs/training.md).
+    dk = jnp.stack([jnp.einsum("bhwf,bhwc->fc", g, xp[:, i:i + h, j:j + w]).T
                     for i in range(k) for j in range(k)])
     return dx, dk.reshape(kernel.shape)
 
