@@ -60,7 +60,7 @@ import jax.numpy as jnp
 from configs.encoders import object_vae_config, scene_vae_config
 from configs.sac import SACConfig
 from configs.segmentation import SegmentationConfig
-from roll_jax import encoders, sac
+from roll_jax import conv, encoders, sac
 from roll_jax.models import _CONV, _DECONV, _FEATURE_MAP, IMAGE_SHAPE
 from roll_jax.segmentation import unet
 
@@ -226,7 +226,7 @@ def bench_unet(features: int, batch: int, steps: int, peak: float) -> dict:
 
 
 def _wgrad_input_major(res, g):
-    """`unet.conv_dot_wgrad`'s backward with each tap's kernel gradient contracted as x^T g
+    """`unet.conv_dot_wgrad`'s backward with each tap's kernel gradient as einsum("bhwc,bhwf->cf")
     (XLA:CPU transposes every tap's input slice), the A/B reference of `unet_wgrad_ab`."""
     x, kernel = res
     k, h, w = kernel.shape[0], x.shape[1], x.shape[2]
@@ -239,25 +239,19 @@ def _wgrad_input_major(res, g):
 
 
 def unet_wgrad_ab(steps: int, rounds: int) -> dict:
-    """The U-Net train step (widths 8 and 16, batch 32) with the kernel gradient contracted as
-    g^T x (the default) against x^T g, alternating in `rounds` rounds in one process."""
+    """The U-Net train step (widths 8 and 16, batch 32) with the kernel gradient as
+    `conv.weight_gradient` (g^T x, the default) against x^T g, interleaved in `rounds` rounds in
+    one process."""
     out = {}
     for features in (8, 16):
         timers = {"g_major": unet_step_timer(features, 32, steps, True)[0]}
-        timers["g_major"]()  # traced and compiled with the default backward
-        unet.conv_dot_wgrad.defvjp(unet._conv_fwd, _wgrad_input_major)
-        try:
-            timers["x_major"] = unet_step_timer(features, 32, steps, True)[0]
-            timers["x_major"]()  # traced now, with the reference backward
-        finally:
-            unet.conv_dot_wgrad.defvjp(unet._conv_fwd, unet._conv_bwd)
-        ms = {name: [] for name in timers}
-        for r in range(rounds):
-            for name in (list(timers) if r % 2 == 0 else list(timers)[::-1]):
-                ms[name].append(1e3 * timers[name]()[1] / steps)
-        med = {name: statistics.median(v) for name, v in ms.items()}
-        out[f"width_{features}"] = {"ms_per_round": ms, "median_ms": med,
-                                    "x_major_over_g_major": med["x_major"] / med["g_major"]}
+        timers["g_major"]()  # traced with the default backward first
+        timers["x_major"] = traced_with_backward(
+            unet.conv_dot_wgrad, unet._conv_fwd, _wgrad_input_major, unet._conv_bwd,
+            lambda f=features: unet_step_timer(f, 32, steps, True)[0])
+        out[f"width_{features}"] = res = interleaved(timers, steps, rounds)
+        med = res["median_ms"]
+        res["x_major_over_g_major"] = med["x_major"] / med["g_major"]
         print(f"  U-Net width {features}: g^T x {med['g_major']:.1f} ms, x^T g "
               f"{med['x_major']:.1f} ms (median of {rounds} interleaved rounds)", flush=True)
     return out
@@ -307,24 +301,56 @@ def sac_yardsticks(steps: int) -> dict:
     return out
 
 
+def interleaved(timers: dict, steps: int, rounds: int) -> dict:
+    """ms per step of each timer over `rounds` rounds, the order flipped every other round (this
+    machine's speed drifts by 10-30% over minutes, more than the differences measured), and the
+    medians."""
+    ms = {name: [] for name in timers}
+    for r in range(rounds):
+        for name in (list(timers) if r % 2 == 0 else list(timers)[::-1]):
+            ms[name].append(1e3 * timers[name]()[1] / steps)
+    return {"ms_per_round": ms, "median_ms": {n: statistics.median(v) for n, v in ms.items()}}
+
+
+def traced_with_backward(fn, fwd, bwd, default_bwd, make_timer):
+    """A timer from `make_timer()` traced and compiled while the custom-VJP function `fn` has
+    the backward `bwd` (then `default_bwd` again): a reference form of a kernel gradient."""
+    fn.defvjp(fwd, bwd)
+    try:
+        timer = make_timer()
+        timer()
+    finally:
+        fn.defvjp(fwd, default_bwd)
+    return timer
+
+
+def _patch_matmul_autodiff_bwd(res, g):
+    """autodiff's backward of `conv.patch_matmul`: XLA:CPU contracts P and g over their major
+    axis (the A/B reference of `conv_forms_ab`)."""
+    p, w = res
+    lead = tuple(range(p.ndim - 1))
+    return g @ w.T, jnp.tensordot(p, g, axes=(lead, lead))
+
+
 def conv_forms_ab(steps: int, rounds: int) -> dict:
     """The VAE train steps with the default convolutions ("matmul") against the patch form in
-    every layer ("matmul_patches"), alternating in `rounds` rounds (order flipped every other
-    round) in one process: this machine's speed drifts by ~10% over minutes, more than the
-    difference measured."""
+    every layer ("matmul_patches") and against the default with autodiff's kernel gradient
+    ("matmul_autodiff_wgrad"), interleaved in `rounds` rounds in one process."""
     out = {}
     for name, cfg in (("scene_vae", scene_vae_config(TASK)), ("object_vae", object_vae_config(TASK))):
         timers = {impl: vae_step_timer(dataclasses.replace(cfg, conv_impl=impl), steps)
                   for impl in ("matmul", "matmul_patches")}
-        ms = {impl: [] for impl in timers}
-        for r in range(rounds):
-            for impl in (list(timers) if r % 2 == 0 else list(timers)[::-1]):
-                ms[impl].append(1e3 * timers[impl]()[1] / steps)
-        med = {impl: statistics.median(v) for impl, v in ms.items()}
-        out[name] = {"ms_per_round": ms, "median_ms": med,
-                     "patches_over_matmul": med["matmul_patches"] / med["matmul"]}
-        print(f"  {name}: matmul {med['matmul']:.2f} ms, matmul_patches "
-              f"{med['matmul_patches']:.2f} ms (median of {rounds} interleaved rounds)", flush=True)
+        for timer in timers.values():  # traced with the default backward first
+            timer()
+        timers["matmul_autodiff_wgrad"] = traced_with_backward(
+            conv.patch_matmul, conv._patch_matmul_fwd, _patch_matmul_autodiff_bwd,
+            conv._patch_matmul_bwd, lambda cfg=cfg: vae_step_timer(cfg, steps))
+        out[name] = interleaved(timers, steps, rounds)
+        med = out[name]["median_ms"]
+        out[name].update({f"{impl}_over_matmul": med[impl] / med["matmul"]
+                          for impl in ("matmul_patches", "matmul_autodiff_wgrad")})
+        print(f"  {name}: " + ", ".join(f"{impl} {v:.2f} ms" for impl, v in med.items())
+              + f" (median of {rounds} interleaved rounds)", flush=True)
     return out
 
 

@@ -4,8 +4,11 @@ XLA:CPU runs ``lax.conv_general_dilated`` far below its matmul rate for the enco
 strided shapes, and its kernel-gradient convolution is slower still inside a ``lax.scan``
 (where every training loop here runs it). A convolution is a matmul over image patches: the
 patches are ``k*k`` strided slices concatenated on the channel axis, so the forward pass is one
-``dot`` and autodiff's backward is two ``dot``s plus pads of the slices -- all ops XLA:CPU runs
-near its matmul rate. Measured figures: bench/roofline.py, docs/training.md.
+``dot`` and the backward two ``dot``s plus pads of the slices -- all ops XLA:CPU runs near its
+matmul rate. The kernel gradient is computed as ``g^T P`` with the transposed output gradient
+``g^T`` materialised (`weight_gradient`): left to itself, XLA:CPU contracts ``P`` and ``g``
+over their major axis, a form its YNNPACK dots do not take, and runs it several times slower.
+Measured figures: bench/roofline.py, docs/training.md.
 
 ``Conv`` / ``ConvTranspose`` are drop-in replacements for flax's ``nn.Conv`` /
 ``nn.ConvTranspose`` with ``padding="VALID"``: the same parameter names, shapes
@@ -15,7 +18,40 @@ roundoff (tests/test_conv.py compares values and gradients), so checkpoints are 
 from __future__ import annotations
 
 import flax.linen as nn
+import jax
 import jax.numpy as jnp
+
+
+def transposed_rows(x: jnp.ndarray) -> jnp.ndarray:
+    """[..., N] -> [N, M] (M = the product of the leading axes), materialised: the optimisation
+    barrier keeps XLA from folding the transpose back into the dot that consumes it."""
+    return jax.lax.optimization_barrier(x.reshape(-1, x.shape[-1]).T)
+
+
+def weight_gradient(g_t: jnp.ndarray, p: jnp.ndarray) -> jnp.ndarray:
+    """sum over rows of p [..., K] outer g -> [K, N], from g_t = `transposed_rows(g)` [N, M]: one
+    canonical [N, M] x [M, K] dot (the barrier keeps XLA from turning it into the P^T g form),
+    then a transpose of the small result."""
+    return jax.lax.optimization_barrier(g_t @ p.reshape(-1, p.shape[-1])).T
+
+
+@jax.custom_vjp
+def patch_matmul(p: jnp.ndarray, w: jnp.ndarray) -> jnp.ndarray:
+    """p [..., K] @ w [K, N], its kernel gradient by `weight_gradient` (same values as
+    autodiff's)."""
+    return p @ w
+
+
+def _patch_matmul_fwd(p, w):
+    return p @ w, (p, w)
+
+
+def _patch_matmul_bwd(res, g):
+    p, w = res
+    return g @ w.T, weight_gradient(transposed_rows(g), p)
+
+
+patch_matmul.defvjp(_patch_matmul_fwd, _patch_matmul_bwd)
 
 
 def patches(x: jnp.ndarray, k: int, stride: int) -> jnp.ndarray:
@@ -34,7 +70,7 @@ def conv_valid(x: jnp.ndarray, kernel: jnp.ndarray, stride: int) -> jnp.ndarray:
     k, _, cin, cout = kernel.shape
     if x.shape[-1] != cin:
         raise ValueError(f"input has {x.shape[-1]} channels, the kernel expects {cin}")
-    return patches(x, k, stride) @ kernel.reshape(k * k * cin, cout)
+    return patch_matmul(patches(x, k, stride), kernel.reshape(k * k * cin, cout))
 
 
 def conv_transpose_valid(x: jnp.ndarray, kernel: jnp.ndarray, stride: int) -> jnp.ndarray:
@@ -60,7 +96,7 @@ def conv_transpose_valid(x: jnp.ndarray, kernel: jnp.ndarray, stride: int) -> jn
     wb = jnp.flip(wb, (0, 1)).reshape(m * m * cin, s * s * cout)
     b, h, w, _ = x.shape
     xp = jnp.pad(x, ((0, 0), (m - 1, m - 1), (m - 1, m - 1), (0, 0)))
-    y = patches(xp, m, 1) @ wb  # [B, H+m-1, W+m-1, s*s*Cout]
+    y = patch_matmul(patches(xp, m, 1), wb)  # [B, H+m-1, W+m-1, s*s*Cout]
     return _blocks_to_image(y.reshape(b, h + m - 1, w + m - 1, s, s, cout), h, w, k, s)
 
 
@@ -91,7 +127,8 @@ def conv_transpose_col2im(x: jnp.ndarray, kernel: jnp.ndarray, stride: int) -> j
     m = -(-k // s)
     b, h, w, _ = x.shape
     wf = jnp.flip(kernel, (0, 1))  # flax does not transpose the kernel: it acts flipped
-    y = (x @ wf.transpose(2, 0, 1, 3).reshape(cin, k * k * cout)).reshape(b, h, w, k, k, cout)
+    y = patch_matmul(x, wf.transpose(2, 0, 1, 3).reshape(cin, k * k * cout))
+    y = y.reshape(b, h, w, k, k, cout)
     hb, wb = h + m - 1, w + m - 1
     phases = [[None] * s for _ in range(s)]
     for a in range(k):
