@@ -17,6 +17,10 @@ whose object is masked badly misplaces the whole ranking. Three measurements:
 3. ``--goal-sweep K`` (with ``--ckpt``): Fig. 5 of the first seed's observation set against K
    goals from `env.sample_goal`, with each goal's offset from the goal space's centre: whether
    the ranking depends on where the goal lies.
+4. (with ``--ckpt``) Fig. 5 of each seed with the codes of the observations whose object is
+   hidden replaced by the mean code of the others (what the perfect-segmentation yardstick
+   does with a hidden object): whether an encoder that put an empty image at the centre of the
+   codes would rank better.
 
     python bench/goal_images.py --task pickup --seg runs/enc/pickup/segmentation \\
         [--ckpt runs/enc/pickup] [--name NAME]   # bench/results/goal_images_NAME.json
@@ -131,6 +135,23 @@ def goal_swap(ob: Observed) -> dict:
     return out
 
 
+def hidden_at_mean(ob: Observed) -> dict:
+    from roll_jax import analysis as A
+
+    out = {}
+    for s, obs in ob.sets.items():
+        hidden = A.object_visibility(obs.labels) < A.HIDDEN_SHARE
+        z = ob.codes[s].copy()
+        z[hidden] = z[~hidden].mean(0)
+        zg = np.asarray(ob.encode_object(obs.goal_rgb[None]), np.float64)[0]
+        out[str(s)] = {"n_hidden": int(hidden.sum()),
+                       "spearman_object": round(A.spearman(
+                           obs.distances, np.linalg.norm(ob.codes[s] - zg, axis=1)), 4),
+                       "hidden_at_mean": round(A.spearman(
+                           obs.distances, np.linalg.norm(z - zg, axis=1)), 4)}
+    return out
+
+
 def _min_median(x) -> list[float] | None:
     return [round(float(np.min(x)), 4), round(float(np.median(x)), 4)] if len(x) else None
 
@@ -201,6 +222,8 @@ def main(argv=None):
         res.update(goal_swap(ob))
         print("Fig. 5 object Spearman, observation set x goal:", res["swap"])
         print("with the near-mean goal code:", res["near_mean_goal_code"])
+        res["hidden_at_mean"] = hidden_at_mean(ob)
+        print("hidden observations at the mean code:", res["hidden_at_mean"])
         if a.goal_sweep:
             res["goal_position_sweep"] = goal_position_sweep(ob, a.seeds[0], a.goal_sweep)
             print("goal position sweep:", {k: v for k, v in res["goal_position_sweep"].items()
