@@ -7,8 +7,9 @@ patches are ``k*k`` strided slices concatenated on the channel axis, so the forw
 ``dot`` and the backward two ``dot``s plus pads of the slices -- all ops XLA:CPU runs near its
 matmul rate. The kernel gradient is computed as ``g^T P`` with the transposed output gradient
 ``g^T`` materialised (`weight_gradient`): left to itself, XLA:CPU contracts ``P`` and ``g``
-over their major axis, a form its YNNPACK dots do not take (the object-VAE train step 15%
-slower, the U-Net's 22-33%). Measured figures: bench/roofline.py, docs/training.md.
+over their major axis, a form its YNNPACK dots do not take (that form adds 14-17% to the
+object-VAE train step, 27-50% to the U-Net's). Measured figures: bench/roofline.py,
+docs/training.md.
 
 ``Conv`` / ``ConvTranspose`` are drop-in replacements for flax's ``nn.Conv`` /
 ``nn.ConvTranspose`` with ``padding="VALID"``: the same parameter names, shapes
