@@ -1,7 +1,7 @@
 """How a task's goal images are segmented and how much Fig. 5 depends on the one goal image.
 
 Figure 5 compares N observations with one goal through the object encoding, so a goal image
-whose object is masked badly misplaces the whole ranking. Three measurements:
+whose object is masked badly misplaces the whole ranking. Four measurements:
 
 1. ``--seg DIR``: the segmentation's masks of `--n` goal images (`env.sample_goal`; on pickup
    split into goals held in the air and goals on the table) against the renderer's labels,
@@ -94,6 +94,7 @@ class Observed(NamedTuple):
     encode_object: Callable
     sets: dict  # seed -> analysis.ObservationSet
     codes: dict  # seed -> object codes [n, d] of that set's observations
+    goal_codes: dict  # seed -> object code [d] of that set's goal image
 
 
 def observed(task: str, ckpt: str, seeds: list[int], n: int) -> Observed:
@@ -105,13 +106,15 @@ def observed(task: str, ckpt: str, seeds: list[int], n: int) -> Observed:
     _, encode_object = A.model_encoders(cfg, pre, seg)
     sets = {s: A.observation_set(env, jax.random.PRNGKey(s), n) for s in seeds}
     codes = {s: np.asarray(encode_object(sets[s].rgb), np.float64) for s in seeds}
-    return Observed(env, seg, encode_object, sets, codes)
+    goal_codes = {s: np.asarray(encode_object(sets[s].goal_rgb[None]), np.float64)[0]
+                  for s in seeds}
+    return Observed(env, seg, encode_object, sets, codes, goal_codes)
 
 
 def goal_swap(ob: Observed) -> dict:
     from roll_jax import analysis as A
 
-    env, encode_object, sets, codes = ob.env, ob.encode_object, ob.sets, ob.codes
+    env, sets, codes = ob.env, ob.sets, ob.codes
     seeds = list(sets)
     all_codes = np.concatenate([codes[s] for s in seeds])
     all_states = np.concatenate([sets[s].states for s in seeds])
@@ -120,7 +123,7 @@ def goal_swap(ob: Observed) -> dict:
     out = {"goal_state": {str(s): sets[s].goal_state.round(4).tolist() for s in seeds},
            "swap": {}, "near_mean_goal_code": {}}
     for g in seeds:
-        zg = np.asarray(encode_object(sets[g].goal_rgb[None]), np.float64)[0]
+        zg = ob.goal_codes[g]
         near = (np.asarray(env.object_distance(all_states, sets[g].goal_state)) < NEAR_M) & whole
         zn = all_codes[near].mean(0)
         out["near_mean_goal_code"][str(g)] = {
@@ -143,7 +146,7 @@ def hidden_at_mean(ob: Observed) -> dict:
         hidden = A.object_visibility(obs.labels) < A.HIDDEN_SHARE
         z = ob.codes[s].copy()
         z[hidden] = z[~hidden].mean(0)
-        zg = np.asarray(ob.encode_object(obs.goal_rgb[None]), np.float64)[0]
+        zg = ob.goal_codes[s]
         out[str(s)] = {"n_hidden": int(hidden.sum()),
                        "spearman_object": round(A.spearman(
                            obs.distances, np.linalg.norm(ob.codes[s] - zg, axis=1)), 4),
