@@ -333,13 +333,16 @@ def _patch_matmul_autodiff_bwd(res, g):
 
 
 def conv_forms_ab(steps: int, rounds: int) -> dict:
-    """The VAE train steps with the default convolutions ("matmul") against the patch form in
-    every layer ("matmul_patches") and against the default with autodiff's kernel gradient
-    ("matmul_autodiff_wgrad"), interleaved in `rounds` rounds in one process."""
+    """The VAE train steps as configured ("matmul": its convolutions, the gradient in
+    `grad_parts` slices) against the patch form in every layer ("matmul_patches"), the
+    gradient of the whole batch at once ("matmul_one_part") and the default with autodiff's
+    kernel gradient ("matmul_autodiff_wgrad"), interleaved in `rounds` rounds in one
+    process."""
     out = {}
     for name, cfg in (("scene_vae", scene_vae_config(TASK)), ("object_vae", object_vae_config(TASK))):
         timers = {impl: vae_step_timer(dataclasses.replace(cfg, conv_impl=impl), steps)
                   for impl in ("matmul", "matmul_patches")}
+        timers["matmul_one_part"] = vae_step_timer(dataclasses.replace(cfg, grad_parts=1), steps)
         for timer in timers.values():  # traced with the default backward first
             timer()
         timers["matmul_autodiff_wgrad"] = traced_with_backward(
@@ -348,7 +351,8 @@ def conv_forms_ab(steps: int, rounds: int) -> dict:
         out[name] = interleaved(timers, steps, rounds)
         med = out[name]["median_ms"]
         out[name].update({f"{impl}_over_matmul": med[impl] / med["matmul"]
-                          for impl in ("matmul_patches", "matmul_autodiff_wgrad")})
+                          for impl in ("matmul_patches", "matmul_one_part",
+                                       "matmul_autodiff_wgrad")})
         print(f"  {name}: " + ", ".join(f"{impl} {v:.2f} ms" for impl, v in med.items())
               + f" (median of {rounds} interleaved rounds)", flush=True)
     return out

@@ -106,11 +106,19 @@ class VAEConfig:
     # "matmul_patches" (the patch form in every layer, for comparison) or "lax" (XLA's
     # convolutions). The parameters and values are the same (float32 roundoff).
     conv_impl: str = "matmul"
+    # Not in the paper: a train step's gradient is the mean of the gradients of this many equal
+    # slices of its batch (loss and metrics are batch means: the same values within float32
+    # roundoff). XLA:CPU runs the slices' independent ops side by side on its threads; measured
+    # in docs/training.md ("Convolutions on the CPU"). 1: the whole batch at once.
+    grad_parts: int = 2
 
     def __post_init__(self):
         _check_positive(self, ("latent_dim", "feature_dim", "batch_size", "lr", "epochs",
                                "batches_per_epoch", "n_pretrain_images", "image_size",
-                               "min_variance"))
+                               "min_variance", "grad_parts"))
+        if self.batch_size % self.grad_parts:
+            raise ValueError(f"VAEConfig.grad_parts={self.grad_parts} does not divide "
+                             f"batch_size={self.batch_size}")
         if self.beta < 0:
             raise ValueError(f"VAEConfig.beta must be >= 0, got {self.beta!r}")
         if self.matching_coef < 0:

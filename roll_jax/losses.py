@@ -79,18 +79,22 @@ def vae_matching_loss(params: Any, model: ConvVAE, images: jax.Array, occluded: 
     return jnp.mean(matching_distance(m_clean, m_occ, one_sided))
 
 
-def vae_loss(params: Any, model: ConvVAE, images: jax.Array, key: jax.Array, beta: float,
+def vae_loss(params: Any, model: ConvVAE, images: jax.Array, noise: jax.Array, beta: float,
              occluded: jax.Array | None = None, matching_coef: float = 0.0,
              one_sided: bool = False, recon_reduction: str = "sum") -> tuple[jax.Array, dict]:
     """beta-VAE loss: squared error (Gaussian identity-variance NLL up to a constant) + beta KL,
-    batch mean; plus matching_coef * L^matching when `occluded` images are given.
+    batch mean; plus matching_coef * L^matching when `occluded` images are given. `noise`
+    [B, latent_dim]: the standard normal draws of the reparameterisation z = mean + std * noise.
 
     recon_reduction "sum" sums the squared error over pixels (the log-likelihood); "mean"
     averages it (reference-code scale).
     """
     check_images(images)
     mean, logvar = model.apply(params, images, method=ConvVAE.encode)
-    z = mean + jnp.exp(0.5 * logvar) * jax.random.normal(key, mean.shape, mean.dtype)
+    if noise.shape != mean.shape:
+        raise ValueError(f"noise must have the latent means' shape {tuple(mean.shape)}, got "
+                         f"{tuple(noise.shape)}")
+    z = mean + jnp.exp(0.5 * logvar) * noise
     recon = model.apply(params, z, method=ConvVAE.decode)
     sse = squared_error(recon, images)
     n_pix = images.shape[-1] * images.shape[-2] * images.shape[-3]

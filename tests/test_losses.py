@@ -75,6 +75,34 @@ def test_vae_train_step_loss_is_the_reference_objective():
     assert float(metrics["matching"]) > 0.0  # the matching term took part
 
 
+def test_gradient_in_parts_equals_the_whole_batch_gradient():
+    """`grad_parts` slices give the whole batch's loss, metrics and gradient (float32
+    roundoff), with the matching loss on; a batch that does not split is refused."""
+    cfg = object_vae_config("puck_push", batch_size=8, matching_coef=400.0)
+    state = encoders.init_vae(jax.random.key(3), cfg)
+    images = disc_images(8, radius=8.0)
+    k_noise, k_occ = jax.random.split(jax.random.key(5))
+    batch = (images, jax.random.normal(k_noise, (8, cfg.latent_dim)),
+             losses.occlude(k_occ, images, None, cfg.occlusion_drop))
+
+    def loss_fn(p, b):
+        return losses.vae_loss(p, encoders.vae_model(cfg), b[0], b[1], cfg.effective_beta,
+                               occluded=b[2], matching_coef=cfg.matching_coef)
+
+    whole = jax.jit(lambda p, b: encoders.grad_in_parts(loss_fn, p, b, 1))(state.params, batch)
+    parts = jax.jit(lambda p, b: encoders.grad_in_parts(loss_fn, p, b, 4))(state.params, batch)
+    assert whole[1].keys() == parts[1].keys() and float(whole[1]["matching"]) > 0
+    for k in whole[1]:
+        np.testing.assert_allclose(float(parts[1][k]), float(whole[1][k]), rtol=1e-5, err_msg=k)
+    for a, b in zip(jax.tree.leaves(whole[0]), jax.tree.leaves(parts[0])):
+        scale = float(jnp.max(jnp.abs(a)))
+        np.testing.assert_allclose(np.asarray(b), np.asarray(a), rtol=0, atol=1e-4 * scale)
+    with pytest.raises(ValueError, match="batch of 8 does not split into grad_parts=3"):
+        encoders.grad_in_parts(loss_fn, state.params, batch, 3)
+    with pytest.raises(ValueError, match="grad_parts=3 does not divide batch_size=8"):
+        object_vae_config("puck_push", batch_size=8, grad_parts=3)
+
+
 def _random_discs(n: int, seed: int, radius: float = 5.0):
     """Segmented images of a disc at uniform random positions, and the positions [n, 2]."""
     rng = np.random.default_rng(seed)
