@@ -109,16 +109,18 @@ class VAEConfig:
     # Not in the paper: a train step's gradient is the mean of the gradients of this many equal
     # slices of its batch (loss and metrics are batch means: the same values within float32
     # roundoff). XLA:CPU runs the slices' independent ops side by side on its threads; measured
-    # in docs/training.md ("Convolutions on the CPU"). 1: the whole batch at once.
-    grad_parts: int = 2
+    # in docs/training.md ("Convolutions on the CPU"). None (auto): 2 on a CPU backend where the
+    # batch splits evenly, else 1 (the whole batch at once; accelerators gain nothing from it).
+    grad_parts: int | None = None
 
     def __post_init__(self):
         _check_positive(self, ("latent_dim", "feature_dim", "batch_size", "lr", "epochs",
                                "batches_per_epoch", "n_pretrain_images", "image_size",
-                               "min_variance", "grad_parts"))
-        if self.batch_size % self.grad_parts:
-            raise ValueError(f"VAEConfig.grad_parts={self.grad_parts} does not divide "
-                             f"batch_size={self.batch_size}")
+                               "min_variance"))
+        if self.grad_parts is not None and not (
+                self.grad_parts > 0 and self.batch_size % self.grad_parts == 0):
+            raise ValueError(f"VAEConfig.grad_parts={self.grad_parts!r} must be None or a "
+                             f"positive divisor of batch_size={self.batch_size}")
         if self.beta < 0:
             raise ValueError(f"VAEConfig.beta must be >= 0, got {self.beta!r}")
         if self.matching_coef < 0:

@@ -150,7 +150,8 @@ class TrainConfig:
         if self.sac.replay_size < self.epoch_env_steps:
             raise ValueError(f"sac.replay_size={self.sac.replay_size} is smaller than one chunk "
                              f"(epoch_env_steps={self.epoch_env_steps})")
-        if self.scene_vae is not None and self.vae_online_batch % self.scene_vae.grad_parts:
+        if (self.scene_vae is not None and self.scene_vae.grad_parts is not None
+                and self.vae_online_batch % self.scene_vae.grad_parts):
             raise ValueError(f"vae_online_batch={self.vae_online_batch} does not split into the "
                              f"scene-VAE's grad_parts={self.scene_vae.grad_parts} equal slices")
         ablated = [n for n, on in (("--no-matching-loss", not self.matching_loss),

@@ -99,8 +99,13 @@ def test_gradient_in_parts_equals_the_whole_batch_gradient():
         np.testing.assert_allclose(np.asarray(b), np.asarray(a), rtol=0, atol=1e-4 * scale)
     with pytest.raises(ValueError, match="batch of 8 does not split into grad_parts=3"):
         encoders.grad_in_parts(loss_fn, state.params, batch, 3)
-    with pytest.raises(ValueError, match="grad_parts=3 does not divide batch_size=8"):
+    with pytest.raises(ValueError, match="grad_parts=3 must be None or a positive divisor of "
+                                         "batch_size=8"):
         object_vae_config("puck_push", batch_size=8, grad_parts=3)
+    # auto: two slices on a CPU where the batch splits, the whole batch otherwise
+    assert jax.default_backend() == "cpu"
+    assert encoders.grad_parts(cfg, 8) == 2 and encoders.grad_parts(cfg, 7) == 1
+    assert encoders.grad_parts(object_vae_config("puck_push", batch_size=8, grad_parts=4), 8) == 4
 
 
 def _random_discs(n: int, seed: int, radius: float = 5.0):
