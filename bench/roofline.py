@@ -30,7 +30,7 @@ BatchNorm, Adam and the losses are not counted):
   gradient: 3P + 4Q): 4P + 12Q MACs, P and Q the MLPs' MACs per sample.
 
     python bench/roofline.py [--chunk] [--quick]
-    python bench/roofline.py --ab ROUNDS   (the two matmul forms only, interleaved)
+    python bench/roofline.py --ab ROUNDS   (the VAE steps' forms only, interleaved)
     python bench/roofline.py --unet-ab ROUNDS   (the U-Net's two kernel-gradient forms)
 
 Writes bench/results/roofline.json (--ab: bench/results/conv_forms.json, --unet-ab:
@@ -365,7 +365,7 @@ def main(argv=None):
                    help="also time SAC inside the cpu-preset chunk (compiles the chunk: minutes)")
     p.add_argument("--quick", action="store_true", help="fewer steps per call")
     p.add_argument("--ab", type=int, metavar="ROUNDS", default=0,
-                   help="only the VAE steps' two matmul forms, interleaved in ROUNDS rounds "
+                   help="only the VAE steps' forms (`conv_forms_ab`), interleaved in ROUNDS rounds "
                         "(writes bench/results/conv_forms.json)")
     p.add_argument("--unet-ab", type=int, metavar="ROUNDS", default=0,
                    help="only the U-Net train step's two kernel-gradient contractions, "
