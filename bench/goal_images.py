@@ -111,6 +111,13 @@ def observed(task: str, ckpt: str, seeds: list[int], n: int) -> Observed:
     return Observed(env, seg, encode_object, sets, codes, goal_codes)
 
 
+def _fig5(distances, codes, goal_code) -> float:
+    """Fig. 5's object Spearman: true distances against the codes' distances to the goal's."""
+    from roll_jax import analysis as A
+
+    return round(A.spearman(distances, np.linalg.norm(codes - goal_code, axis=1)), 4)
+
+
 def goal_swap(ob: Observed) -> dict:
     from roll_jax import analysis as A
 
@@ -129,12 +136,10 @@ def goal_swap(ob: Observed) -> dict:
         out["near_mean_goal_code"][str(g)] = {
             "n_near": int(near.sum()), "goal_code_offset": round(float(np.linalg.norm(zg - zn)), 4),
             "near_code_spread": round(float(np.linalg.norm(all_codes[near] - zn, axis=1).mean()), 4),
-            "spearman_object": round(A.spearman(sets[g].distances,
-                                                np.linalg.norm(codes[g] - zn, axis=1)), 4)}
+            "spearman_object": _fig5(sets[g].distances, codes[g], zn)}
         for s in seeds:
             d = np.asarray(env.object_distance(sets[s].states, sets[g].goal_state))
-            out["swap"][f"obs{s}_goal{g}"] = round(
-                A.spearman(d, np.linalg.norm(codes[s] - zg, axis=1)), 4)
+            out["swap"][f"obs{s}_goal{g}"] = _fig5(d, codes[s], zg)
     return out
 
 
@@ -148,10 +153,8 @@ def hidden_at_mean(ob: Observed) -> dict:
         z[hidden] = z[~hidden].mean(0)
         zg = ob.goal_codes[s]
         out[str(s)] = {"n_hidden": int(hidden.sum()),
-                       "spearman_object": round(A.spearman(
-                           obs.distances, np.linalg.norm(ob.codes[s] - zg, axis=1)), 4),
-                       "hidden_at_mean": round(A.spearman(
-                           obs.distances, np.linalg.norm(z - zg, axis=1)), 4)}
+                       "spearman_object": _fig5(obs.distances, ob.codes[s], zg),
+                       "hidden_at_mean": _fig5(obs.distances, z, zg)}
     return out
 
 

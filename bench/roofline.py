@@ -228,14 +228,8 @@ def bench_unet(features: int, batch: int, steps: int, peak: float) -> dict:
 def _wgrad_input_major(res, g):
     """`unet.conv_dot_wgrad`'s backward with each tap's kernel gradient as einsum("bhwc,bhwf->cf")
     (XLA:CPU transposes every tap's input slice), the A/B reference of `unet_wgrad_ab`."""
-    x, kernel = res
-    k, h, w = kernel.shape[0], x.shape[1], x.shape[2]
-    dx = unet._conv(g, jnp.flip(kernel, (0, 1)).swapaxes(2, 3))
-    p = k // 2
-    xp = jnp.pad(x, ((0, 0), (p, p), (p, p), (0, 0)))
-    dk = jnp.stack([jnp.einsum("bhwc,bhwf->cf", xp[:, i:i + h, j:j + w], g)
-                    for i in range(k) for j in range(k)])
-    return dx, dk.reshape(kernel.shape)
+    return unet.conv_backward(
+        res, g, lambda g, taps: [jnp.einsum("bhwc,bhwf->cf", x, g) for x in taps])
 
 
 def unet_wgrad_ab(steps: int, rounds: int) -> dict:

@@ -133,9 +133,9 @@ def vae_train_step(state: ModelState, key: jax.Array, images: jax.Array, cfg: VA
     noise = jax.random.normal(k_noise, (images.shape[0], cfg.latent_dim))
 
     def loss_fn(p, batch):
-        images, noise, occluded = batch
-        return losses.vae_loss(p, vae_model(cfg), images, noise, cfg.effective_beta,
-                               occluded=occluded, matching_coef=cfg.matching_coef,
+        x, eps, x_occ = batch
+        return losses.vae_loss(p, vae_model(cfg), x, eps, cfg.effective_beta,
+                               occluded=x_occ, matching_coef=cfg.matching_coef,
                                one_sided=cfg.matching_one_sided,
                                recon_reduction=cfg.recon_reduction)
 

@@ -61,18 +61,28 @@ def _conv_fwd(x, kernel):
     return _conv(x, kernel), (x, kernel)
 
 
-def _conv_bwd(res, g):
+def tap_weight_gradients(g, taps) -> list:
+    """Each tap's kernel gradient [Cin, Cout] as g^T x, g transposed once for all taps
+    (conv.weight_gradient: XLA:CPU would otherwise transpose each tap's input slice and run a
+    slower dot form; docs/training.md)."""
+    g_t = conv.transposed_rows(g)
+    return [conv.weight_gradient(g_t, x) for x in taps]
+
+
+def conv_backward(res, g, tap_gradients=tap_weight_gradients):
+    """(dx, dkernel) of `conv_dot_wgrad`: the input gradient as a conv with the flipped
+    kernel, the kernel gradient from `tap_gradients(g, the k*k shifted input slices)`."""
     x, kernel = res
     k, h, w = kernel.shape[0], x.shape[1], x.shape[2]
     dx = _conv(g, jnp.flip(kernel, (0, 1)).swapaxes(2, 3))
     p = k // 2
     xp = jnp.pad(x, ((0, 0), (p, p), (p, p), (0, 0)))
-    # g^T x per tap, g transposed once for all k*k taps (conv.weight_gradient: XLA:CPU would
-    # otherwise transpose each tap's input slice and run a slower dot form; docs/training.md).
-    g_t = conv.transposed_rows(g)
-    dk = jnp.stack([conv.weight_gradient(g_t, xp[:, i:i + h, j:j + w])
-                    for i in range(k) for j in range(k)])
-    return dx, dk.reshape(kernel.shape)
+    taps = [xp[:, i:i + h, j:j + w] for i in range(k) for j in range(k)]
+    return dx, jnp.stack(tap_gradients(g, taps)).reshape(kernel.shape)
+
+
+def _conv_bwd(res, g):
+    return conv_backward(res, g)
 
 
 conv_dot_wgrad.defvjp(_conv_fwd, _conv_bwd)
