@@ -11,9 +11,10 @@ of the matmul rate measured in the same process.
 4. SAC update standalone on a fixed batch: the cpu preset's 128-128 at batch 256, the paper's
    400-300 at batch 1024;
 5. (--chunk) SAC per update inside the cpu-preset ROLL chunk: the same compiled chunk run with
-   the plan's `learn` on and off (`loop.ChunkPlan`, an un-batched switch), the difference
-   divided by its updates; HER sampling, prior goals through the LSTM and the gathers
-   included.
+   the plan's `learn` on and off (`loop.ChunkPlan`, an un-batched switch), plan by plan, the
+   difference divided by its updates; HER sampling, prior goals through the LSTM and the
+   gathers included. After each on/off pair the standalone update and its fairer yardsticks
+   (`sac_yardstick_timer`) are timed again, and the ratios are the medians over the pairs.
 
 Every step runs inside a jitted `lax.scan` (how training runs them), timed after a warm-up,
 best of several calls.
@@ -29,7 +30,7 @@ BatchNorm, Adam and the losses are not counted):
   + backward: P + 2Q + 6Q) and actor (policy forward + backward, twin-Q forward + input
   gradient: 3P + 4Q): 4P + 12Q MACs, P and Q the MLPs' MACs per sample.
 
-    python bench/roofline.py [--chunk] [--quick]
+    python bench/roofline.py [--chunk [--chunk-rounds 2]] [--quick]
     python bench/roofline.py --ab ROUNDS   (the VAE steps' forms only, interleaved)
     python bench/roofline.py --unet-ab ROUNDS   (the U-Net's two kernel-gradient forms)
 
@@ -275,24 +276,41 @@ def bench_sac(hidden, batch: int, steps: int, peak: float, obs=6, goal=6, act=2)
                 batch=batch, compile_and_first_call_s=first)
 
 
-def bench_sac_in_chunk() -> dict:
-    """Per-update SAC cost inside the cpu-preset ROLL chunk: learn on minus learn off."""
+def bench_sac_in_chunk(rounds: int) -> dict:
+    """Per-update SAC cost inside the cpu-preset ROLL chunk (learn on minus learn off, plan by
+    plan), each on/off pair followed by the yardsticks of `sac_yardstick_timer`."""
     spec = importlib.util.spec_from_file_location("bench_train", os.path.join(ROOT, "bench",
                                                                               "train.py"))
     bt = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bt)
-    return bt.sac_share_in_chunk(TASK, "cpu")
+    return bt.sac_share_in_chunk(TASK, "cpu", rounds=rounds,
+                                 yardsticks=sac_yardstick_timer(300))
 
 
-def sac_yardsticks(steps: int) -> dict:
-    """ms per update of bench/sac_parts.py's variants at the cpu preset's sizes, this process."""
+def sac_yardstick_timer(steps: int):
+    """A function -> {name: best ms per update} of bench/sac_parts.py's variants at the cpu
+    preset's sizes, each compiled once: the standalone update (one constant batch, XLA's
+    defaults, as `bench_sac` times it), the same on a new batch per update, and
+    `loop.sac_steps` (HER sampling + update) with XLA's defaults and with the chunk's options."""
     from bench import sac_parts as sp
+    from roll_jax import loop
 
-    out = {}
-    for name, v in sp.variants(steps).items():
-        if name != "HER sampling and relabeling alone":
-            out[name] = sp.ms_per_update(v)
-    return out
+    v = sp.variants(steps)
+    forms = {
+        "standalone update": (v["update, constant batch, metrics dropped (roofline standalone)"],
+                              None),
+        "update on a new batch": (v["update, new batch per update, metrics kept"], None),
+        "loop.sac_steps": (v["loop.sac_steps (sampling + update)"], None),
+        "loop.sac_steps, chunk options": (v["loop.sac_steps (sampling + update)"],
+                                          loop.chunk_compiler_options()),
+    }
+    compiled = {name: (jax.jit(var.fn, compiler_options=opts).lower(*var.args).compile(), var)
+                for name, (var, opts) in forms.items()}
+
+    def timer() -> dict:
+        return {name: 1e3 * time_best(c, *var.args)[1] / var.updates
+                for name, (c, var) in compiled.items()}
+    return timer
 
 
 def interleaved(timers: dict, steps: int, rounds: int) -> dict:
@@ -357,6 +375,8 @@ def main(argv=None):
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--chunk", action="store_true",
                    help="also time SAC inside the cpu-preset chunk (compiles the chunk: minutes)")
+    p.add_argument("--chunk-rounds", type=int, default=2, metavar="N",
+                   help="--chunk: refresh cycles of 4 plans, each plan with SAC on and off")
     p.add_argument("--quick", action="store_true", help="fewer steps per call")
     p.add_argument("--ab", type=int, metavar="ROUNDS", default=0,
                    help="only the VAE steps' forms (`conv_forms_ab`), interleaved in ROUNDS rounds "
@@ -366,6 +386,8 @@ def main(argv=None):
                         "interleaved in ROUNDS rounds (writes bench/results/unet_wgrad_order.json)")
     p.add_argument("--out", default=None)
     a = p.parse_args(argv)
+    if a.chunk_rounds < 1:
+        p.error(f"--chunk-rounds must be >= 1, got {a.chunk_rounds}")
     steps = 5 if a.quick else 20
     if a.unet_ab:
         res = {"cpu_count": os.cpu_count(), "jax_version": jax.__version__,
@@ -397,18 +419,17 @@ def main(argv=None):
     res["sac"] = [bench_sac((128, 128), 256, steps * 5, peak),
                   bench_sac((400, 300), 1024, steps, peak)]
     if a.chunk:
-        print("SAC inside the cpu-preset chunk", flush=True)
-        res["sac_in_chunk"] = bench_sac_in_chunk()
+        # The standalone update trains on one constant batch, so XLA folds part of its work;
+        # the same update on a new batch per update, and `loop.sac_steps` (HER sampling
+        # included) outside the chunk, are the fairer yardsticks (bench/sac_parts.py). Each
+        # is timed after every on/off pair of chunks: their ratios are taken pair by pair.
+        print(f"SAC inside the cpu-preset chunk, {a.chunk_rounds} refresh cycle(s)", flush=True)
+        res["sac_in_chunk"] = bench_sac_in_chunk(a.chunk_rounds)
         in_chunk = res["sac_in_chunk"]["sac_ms_per_update"]
-        res["sac_in_chunk"]["over_standalone"] = in_chunk / res["sac"][0]["ms"]
-        print(f"  in-chunk / standalone per update: "
-              f"{res['sac_in_chunk']['over_standalone']:.2f}", flush=True)
-        # The standalone update above trains on one constant batch, so XLA folds part of its
-        # work; the same update on a new batch per update, and `loop.sac_steps` (HER sampling
-        # included) outside the chunk, are the fairer yardsticks (bench/sac_parts.py).
-        res["sac_in_chunk"]["yardsticks"] = sac_yardsticks(300)
-        for name, ms in res["sac_in_chunk"]["yardsticks"].items():
-            print(f"  in-chunk / {name} ({ms:.3f} ms): {in_chunk / ms:.2f}", flush=True)
+        res["sac_in_chunk"]["over_standalone"] = res["sac_in_chunk"]["median_over"][
+            "standalone update"]
+        print(f"  in-chunk ({in_chunk:.2f} ms, mean) / standalone per update, median of the "
+              f"pairs: {res['sac_in_chunk']['over_standalone']:.2f}", flush=True)
     write_results(a.out or RESULTS, res)
 
 

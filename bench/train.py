@@ -172,12 +172,18 @@ def _sac_share(with_sac: float, without_sac: float, n_updates: int) -> dict:
 
 
 def sac_share_in_chunk(task: str, preset: str, first_epoch: int = 20, seeds: int = 1,
-                       replay_size: int | None = None) -> dict:
+                       replay_size: int | None = None, rounds: int = 1,
+                       yardsticks=None) -> dict:
     """The chunk `train.py --preset PRESET` compiles (its schedules; its replay size unless
-    `replay_size` is given), timed over one refresh cycle of steady-state plans (epochs
-    `first_epoch` onwards: LSTM rounds, cached-latent refreshes as a run has them) with the
-    plans' SAC on and off: the difference is the cost of the SAC updates inside the chunk (HER
-    sampling, prior goals, gathers included)."""
+    `replay_size` is given), timed over `rounds` refresh cycles of steady-state plans (epochs
+    `first_epoch` onwards: LSTM rounds, cached-latent refreshes as a run has them), each plan
+    run with its SAC on and off back to back (the order flipped every other pair): the
+    difference is the cost of the SAC updates inside the chunk (HER sampling, prior goals,
+    gathers included).
+
+    `yardsticks`: a function -> {name: ms per update} (e.g. the standalone update), called
+    after each pair, so that each pair's in-chunk cost has yardsticks timed beside it on this
+    drifting machine; the result then holds every pair's ratios and their medians."""
     a = argparse.Namespace(task=task, preset=preset, replay_size=replay_size, chunks=1,
                            n_envs=None, epoch_env_steps=None)
     base = make_config(task, "roll", preset)
@@ -195,17 +201,29 @@ def sac_share_in_chunk(task: str, preset: str, first_epoch: int = 20, seeds: int
     print(f"  {task} {preset} chunk: trace+lower {lower_s:.1f} s, compile {compile_s:.1f} s",
           flush=True)
     (state, _), first, _ = _call(compiled, state, frozen, plans[0])
-    means = {}
-    for name in ("on", "off"):
-        walls = []
-        for pl in plans:
-            pl = pl if name == "on" else pl.replace(learn=jnp.bool_(False))
-            (state, _), w, _ = _call(compiled, state, frozen, pl)
-            walls.append(w)
-        means[name] = statistics.mean(walls)
-        print(f"  SAC {name}: chunks {[round(w, 2) for w in walls]} s", flush=True)
     n_updates = cfg.epoch_env_steps * cfg.sac.updates_per_step
-    res = _sac_share(means["on"], means["off"], n_updates)
+    walls = {"on": [], "off": []}
+    pairs = []
+    for i, pl in enumerate(plans * rounds):
+        for name in (("on", "off") if i % 2 == 0 else ("off", "on")):
+            (state, _), w, _ = _call(compiled, state, frozen,
+                                     pl if name == "on" else pl.replace(learn=jnp.bool_(False)))
+            walls[name].append(w)
+        pair = {"sac_ms_per_update": 1e3 * (walls["on"][-1] - walls["off"][-1]) / n_updates}
+        if yardsticks is not None:
+            pair["yardsticks_ms"] = yardsticks()
+            pair["over"] = {k: pair["sac_ms_per_update"] / v
+                            for k, v in pair["yardsticks_ms"].items()}
+        pairs.append(pair)
+    for name in ("on", "off"):
+        print(f"  SAC {name}: chunks {[round(w, 2) for w in walls[name]]} s", flush=True)
+    res = _sac_share(statistics.mean(walls["on"]), statistics.mean(walls["off"]), n_updates)
+    res["pairs"] = pairs
+    if yardsticks is not None:
+        res["median_over"] = {k: statistics.median(p["over"][k] for p in pairs)
+                              for k in pairs[0]["over"]}
+        for k, v in res["median_over"].items():
+            print(f"  in-chunk / {k}: median {v:.2f} over {len(pairs)} pairs", flush=True)
     res.update(lower_s=lower_s, compile_s=compile_s, first_chunk_s=first,
                sac_hidden=list(cfg.sac.hidden), sac_batch_size=cfg.sac.batch_size,
                replay_size=cfg.sac.replay_size, sac_schedule=cfg.sac_schedule,
