@@ -1,5 +1,5 @@
 """What the benchmarks share: timing a jitted function, running a CLI in its own process,
-writing a results JSON."""
+the machine a result was measured on, writing a results JSON."""
 from __future__ import annotations
 
 import json
@@ -22,6 +22,20 @@ def cpu_model() -> str:
     except OSError:
         pass
     return ""
+
+
+def machine_info() -> dict:
+    """What a results JSON records of the machine it was measured on: JAX's backend, device and
+    version, the CPU and its core count, and the load average when the benchmark started."""
+    import platform
+
+    import jax
+
+    device = jax.devices()[0]
+    return {"jax_backend": jax.default_backend(), "jax_device": str(device),
+            "device_kind": device.device_kind, "jax_version": jax.__version__,
+            "cpu": platform.processor() or platform.machine(), "cpu_model": cpu_model(),
+            "cpu_count": os.cpu_count(), "load_average_at_start": list(os.getloadavg())}
 
 
 def run_module(args: list[str]) -> tuple[float, str]:

@@ -23,13 +23,12 @@ import argparse
 import functools
 import json
 import os
-import platform
 import sys
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from bench.common import time_best, write_results  # noqa: E402
+from bench.common import machine_info, time_best, write_results  # noqa: E402
 
 import jax
 import jax.numpy as jnp
@@ -147,10 +146,7 @@ def main(argv=None):
     lcfg = lstm_config(TASK)
     t0 = time.perf_counter()
     res = {
-        "jax_backend": jax.default_backend(), "jax_device": str(jax.devices()[0]),
-        "device_kind": jax.devices()[0].device_kind, "jax_version": jax.__version__,
-        "cpu": platform.processor() or platform.machine(), "cpu_count": os.cpu_count(),
-        "load_average_at_start": list(os.getloadavg()),
+        **machine_info(),
         "task_configs": TASK,
         "note": ("steps/s of one jitted lax.scan of K train steps (Adam included), best of "
                  "repeats after a warm-up call; synthetic data (random images for the scene-VAE, "

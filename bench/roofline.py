@@ -45,7 +45,6 @@ import importlib.util
 import json
 import math
 import os
-import platform
 import statistics
 import sys
 import time
@@ -53,7 +52,7 @@ import time
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
-from bench.common import time_best, write_results  # noqa: E402
+from bench.common import machine_info, time_best, write_results  # noqa: E402
 
 import jax
 import jax.numpy as jnp
@@ -404,10 +403,7 @@ def main(argv=None):
         res.update(conv_forms_ab(steps, a.ab))
         write_results(a.out or AB_RESULTS, res)
         return
-    res = {"jax_backend": jax.default_backend(), "jax_version": jax.__version__,
-           "cpu": platform.processor() or platform.machine(), "cpu_count": os.cpu_count(),
-           "load_average_at_start": list(os.getloadavg()), "task_configs": TASK,
-           "note": __doc__.split("\n\n")[0]}
+    res = {**machine_info(), "task_configs": TASK, "note": __doc__.split("\n\n")[0]}
     print("matmul reference", flush=True)
     res["matmul"] = bench_matmul()
     peak = res["matmul"]["gflop_per_s"]

@@ -47,14 +47,13 @@ import argparse
 import dataclasses
 import json
 import os
-import platform
 import statistics
 import sys
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from bench.common import write_results  # noqa: E402
+from bench.common import machine_info, write_results  # noqa: E402
 
 import jax
 import jax.numpy as jnp
@@ -541,10 +540,7 @@ def main(argv=None):
         p.error(str(e))
     t0 = time.perf_counter()
     res = {
-        "jax_backend": jax.default_backend(), "jax_device": str(jax.devices()[0]),
-        "device_kind": jax.devices()[0].device_kind, "jax_version": jax.__version__,
-        "cpu": platform.processor() or platform.machine(), "cpu_count": os.cpu_count(),
-        "load_average_at_start": list(os.getloadavg()),
+        **machine_info(),
         "task": a.task, "preset": a.preset, "git": _git_info(),
         "args": vars(a),
         "note": ("whole chunk = loop.compile_chunk (the training code path), compile timed "
