@@ -241,7 +241,7 @@ def unet_wgrad_ab(steps: int, rounds: int) -> dict:
         timers = {"g_major": unet_step_timer(features, 32, steps, True)[0]}
         timers["g_major"]()  # traced with the default backward first
         timers["x_major"] = traced_with_backward(
-            unet.conv_dot_wgrad, unet._conv_fwd, _wgrad_input_major, unet._conv_bwd,
+            unet.conv_dot_wgrad, unet._conv_fwd, _wgrad_input_major, unet.conv_backward,
             lambda f=features: unet_step_timer(f, 32, steps, True)[0])
         out[f"width_{features}"] = res = interleaved(timers, steps, rounds)
         med = res["median_ms"]
@@ -389,16 +389,14 @@ def main(argv=None):
         p.error(f"--chunk-rounds must be >= 1, got {a.chunk_rounds}")
     steps = 5 if a.quick else 20
     if a.unet_ab:
-        res = {"cpu_count": os.cpu_count(), "jax_version": jax.__version__,
-               "load_average_at_start": list(os.getloadavg()),
+        res = {**machine_info(),
                "note": unet_wgrad_ab.__doc__.split("\n\n")[0], "rounds": a.unet_ab,
                "steps": max(steps // 4, 3)}
         res.update(unet_wgrad_ab(max(steps // 4, 3), a.unet_ab))
         write_results(a.out or UNET_AB_RESULTS, res)
         return
     if a.ab:
-        res = {"cpu_count": os.cpu_count(), "jax_version": jax.__version__,
-               "load_average_at_start": list(os.getloadavg()), "task_configs": TASK,
+        res = {**machine_info(), "task_configs": TASK,
                "note": conv_forms_ab.__doc__.split("\n\n")[0], "rounds": a.ab, "steps": steps}
         res.update(conv_forms_ab(steps, a.ab))
         write_results(a.out or AB_RESULTS, res)

@@ -81,11 +81,7 @@ def conv_backward(res, g, tap_gradients=tap_weight_gradients):
     return dx, jnp.stack(tap_gradients(g, taps)).reshape(kernel.shape)
 
 
-def _conv_bwd(res, g):
-    return conv_backward(res, g)
-
-
-conv_dot_wgrad.defvjp(_conv_fwd, _conv_bwd)
+conv_dot_wgrad.defvjp(_conv_fwd, conv_backward)
 
 
 class Conv(nn.Module):
