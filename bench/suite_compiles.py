@@ -1,9 +1,12 @@
-"""Where `make test`'s time goes: every XLA compile of the test suite, by test file.
+"""Where `make test`'s time goes: every XLA compile of the test suite, and each test file's
+time, by test file.
 
 Runs the suite as `make test` does (two xdist workers, whole files per worker, the empty
 compilation cache of a clean clone) with this module as a pytest plugin: it turns on
-`jax_log_compiles` and logs each compile, with the test that caused it, to one file per
-worker. Then it sums them up:
+`jax_log_compiles` and logs each compile, with the test that caused it, and when each test
+started and ended, to files per worker. Then it sums them up:
+- each file's worker and its span on that worker (first test's start to last test's end,
+  setup and fixtures included), and when each worker finished;
 - XLA compile seconds per test file;
 - programs whose persistent-cache key was compiled more than once (in both workers, or twice in
   one), i.e. what a shared compilation cache could still save within one run.
@@ -40,6 +43,7 @@ _MISS = re.compile(r"CACHE MISS for '(.*)' with key '(.*)'")
 
 _current = ["<collection>"]
 _log = None
+_timeline = None
 
 
 def pytest_configure(config):
@@ -50,8 +54,10 @@ def pytest_configure(config):
     import jax
 
     jax.config.update("jax_log_compiles", True)
+    global _timeline
     worker = os.environ.get("PYTEST_XDIST_WORKER", "main")
     _log = open(os.path.join(folder, f"compiles_{worker}.tsv"), "a", buffering=1)
+    _timeline = open(os.path.join(folder, f"timeline_{worker}.tsv"), "a", buffering=1)
 
     class Handler(logging.Handler):
         def emit(self, record):
@@ -71,7 +77,41 @@ def pytest_runtest_setup(item):
     _current[0] = item.nodeid
 
 
+def pytest_runtest_logstart(nodeid, location):
+    if _timeline is not None:
+        _timeline.write(f"{time.time():.3f}\tstart\t{nodeid}\n")
+
+
+def pytest_runtest_logfinish(nodeid, location):
+    if _timeline is not None:
+        _timeline.write(f"{time.time():.3f}\tend\t{nodeid}\n")
+
+
 # ----------------------------------------------------------------------------- the summary
+
+def file_spans(folder: str) -> dict:
+    """Each test file's worker and span (seconds from the first test's start in any worker),
+    and each worker's finishing time, from the timeline logs."""
+    spans, t0 = {}, None
+    for path in sorted(glob.glob(os.path.join(folder, "timeline_*.tsv"))):
+        worker = os.path.basename(path)[len("timeline_"):-len(".tsv")]
+        with open(path) as f:
+            for line in f:
+                t, _, nodeid = line.rstrip("\n").split("\t", 2)
+                t, name = float(t), nodeid.split("::")[0]
+                t0 = t if t0 is None else min(t0, t)
+                span = spans.setdefault(name, [worker, t, t])
+                span[1], span[2] = min(span[1], t), max(span[2], t)
+    if not spans:
+        return {}
+    per_file = {name: {"worker": w, "start_s": round(a - t0, 1), "end_s": round(b - t0, 1),
+                       "s": round(b - a, 1)}
+                for name, (w, a, b) in sorted(spans.items(), key=lambda kv: kv[1][1])}
+    ends: dict[str, float] = {}
+    for v in per_file.values():
+        ends[v["worker"]] = max(ends.get(v["worker"], 0.0), v["end_s"])
+    return {"file_wall_s": per_file, "worker_end_s": ends}
+
 
 def summarise(folder: str) -> dict:
     """Compile seconds per test file and the keys compiled more than once, from the logs."""
@@ -147,7 +187,10 @@ def main() -> None:
                    children_cpu_s=round(c1.children_user + c1.children_system
                                         - c0.children_user - c0.children_system, 1))
     res["logs"] = folder
+    res.update(file_spans(folder))
     res.update(summarise(folder))
+    for k, v in res.get("file_wall_s", {}).items():
+        print(f"  {v['s']:7.1f} s  {v['worker']:4s} {v['start_s']:6.1f}-{v['end_s']:6.1f}  {k}")
     for k, v in res["compile_s_per_file"].items():
         print(f"  {v['s']:7.1f} s  {v['worker']:4s} {k}")
     print(f"compiles {res['compile_s_total']} s in all; compiled more than once: "

@@ -1,4 +1,4 @@
-"""The paper's experiment grid: tasks x algorithms (x seeds vmapped in one run), ablations,
+"""The paper's experiment grid: tasks x algorithms (x seeds, in one run each), ablations,
 Figure 4, the ablation figure and a results table.
 
     python -m roll_jax.reproduce --preset paper --out runs/paper
@@ -7,8 +7,8 @@ Figure 4, the ablation figure and a results table.
     python -m roll_jax.reproduce ... --report-only          # redraw from the runs on disk
     python -m roll_jax.reproduce ... --jobs 2               # 2 cells at once (CPU)
 
-Each cell is one `roll_jax.train.run` in DIR/runs/TASK__VARIANT (all seeds vmapped, sharded
-over --devices). A run with the completion marker is skipped (never rerun, never
+Each cell is one `roll_jax.train.run` in DIR/runs/TASK__VARIANT (all its seeds in one program:
+vmapped on a GPU, one after the other on a CPU, `--seed-batch`; sharded over --devices). A run with the completion marker is skipped (never rerun, never
 overwritten); an incomplete one is resumed from its last checkpoint. Every cell's config is
 built, and checked against what DIR already holds, before anything runs. The segmentation is
 fitted once per task (DIR/segmentation/TASK, shared by the task's ROLL runs: same seed, same
@@ -75,8 +75,8 @@ def parse_args(argv=None):
     p.add_argument("--ablations", action="store_true",
                    help=f"also ROLL without matching loss / LSTM / object-VAE on {ABLATION_TASK}")
     p.add_argument("--seeds", type=int, default=None,
-                   help="seeds per run (vmapped); default 6 (the paper's) with --preset paper, "
-                        "2 with --preset smoke (a median and a band, at CPU cost)")
+                   help="seeds per run; default 2 with --preset smoke (a median and a band, "
+                        "at CPU cost), otherwise 6 (the paper's)")
     p.add_argument("--seed", type=int, default=0, help="base PRNG seed of every run")
     p.add_argument("--devices", default="all", help="'all' or N: shard the seeds over devices")
     p.add_argument("--seed-batch", default="auto",

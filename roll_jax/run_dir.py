@@ -1,4 +1,4 @@
-"""A training run's directory (docs/architecture.md, "Run directory"): what is in it and how
+"""A training run's directory (docs/architecture.md, "Training CLI and the run directory"): what is in it and how
 each file is written and read.
 
     config.json      the TrainConfig (`dataclasses.asdict`), written at the start

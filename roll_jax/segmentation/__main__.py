@@ -1,8 +1,8 @@
 """Fit and evaluate a task's unknown-object segmentation.
 
-    python -m roll_jax.segmentation --task puck_push [--preset smoke|paper] --out DIR
+    python -m roll_jax.segmentation --task puck_push [--preset smoke|cpu|paper] --out DIR
 
-Writes DIR/params (orbax) + DIR/meta.json, DIR/segmentation_eval.json (iou, robot_leakage,
+Writes DIR/ckpt (orbax params + meta.json), DIR/segmentation_eval.json (iou, robot_leakage,
 background_leakage, timings), DIR/figure2.png (original, foreground, robot mask, object mask,
 segmented object) and DIR/background.png (the MOG2 background image).
 """
