@@ -47,14 +47,13 @@ _timeline = None
 
 
 def pytest_configure(config):
-    global _log
+    global _log, _timeline
     folder = os.environ.get(LOG_DIR_ENV)
     if not folder or _log is not None:
         return
     import jax
 
     jax.config.update("jax_log_compiles", True)
-    global _timeline
     worker = os.environ.get("PYTEST_XDIST_WORKER", "main")
     _log = open(os.path.join(folder, f"compiles_{worker}.tsv"), "a", buffering=1)
     _timeline = open(os.path.join(folder, f"timeline_{worker}.tsv"), "a", buffering=1)

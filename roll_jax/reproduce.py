@@ -7,9 +7,10 @@ Figure 4, the ablation figure and a results table.
     python -m roll_jax.reproduce ... --report-only          # redraw from the runs on disk
     python -m roll_jax.reproduce ... --jobs 2               # 2 cells at once (CPU)
 
-Each cell is one `roll_jax.train.run` in DIR/runs/TASK__VARIANT (all its seeds in one program:
-vmapped on a GPU, one after the other on a CPU, `--seed-batch`; sharded over --devices). A run with the completion marker is skipped (never rerun, never
-overwritten); an incomplete one is resumed from its last checkpoint. Every cell's config is
+Each cell is one `roll_jax.train.run` in DIR/runs/TASK__VARIANT (all its seeds in one
+program: vmapped on a GPU, one after the other on a CPU, `--seed-batch`; sharded over
+--devices). A run with the completion marker is skipped (never rerun, never overwritten); an
+incomplete one is resumed from its last checkpoint. Every cell's config is
 built, and checked against what DIR already holds, before anything runs. The segmentation is
 fitted once per task (DIR/segmentation/TASK, shared by the task's ROLL runs: same seed, same
 config, so the same fit); pre-training datasets and models are shared the same way

@@ -1,5 +1,5 @@
-"""A training run's directory (docs/architecture.md, "Training CLI and the run directory"): what is in it and how
-each file is written and read.
+"""A training run's directory (docs/architecture.md, "Training CLI and the run directory"):
+what is in it and how each file is written and read.
 
     config.json      the TrainConfig (`dataclasses.asdict`), written at the start
     metrics.csv      one row per seed and evaluation (env_steps, seed, final_distance, ...)
