@@ -15,13 +15,12 @@ from __future__ import annotations
 import json
 import os
 import sys
-import time
 
 import jax
 import jax.numpy as jnp
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from bench.common import machine_info  # noqa: E402
+from bench.common import machine_info, time_best  # noqa: E402
 
 RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results",
                        "xla_cpu_overlap.json")
@@ -48,24 +47,18 @@ def elementwise_unrolled(y):
     return y
 
 
-def best_ms(f, *args, reps: int = 7) -> float:
-    jax.block_until_ready(f(*args))
-    times = []
-    for _ in range(reps):
-        t = time.perf_counter()
-        jax.block_until_ready(f(*args))
-        times.append(time.perf_counter() - t)
-    return round(1e3 * min(times), 2)
+def best_ms(f, *args) -> float:
+    return round(1e3 * time_best(f, *args, repeats=7)[1], 2)
 
 
-def nested(fa, fb, use_a: bool = True, use_b: bool = True, cond: bool = True):
-    """OUTER steps, each running fb on y and fa on x (under a cond like the chunk's updates)."""
+def nested(fa, fb, use_a: bool = True, use_b: bool = True):
+    """OUTER steps, each running fb on y and fa on x under a cond (as the chunk's updates)."""
     def body(carry, _):
         x, y = carry
         if use_b:
             y = fb(y)
         if use_a:
-            x = jax.lax.cond(x[0, 0] > -1, fa, lambda v: v, x) if cond else fa(x)
+            x = jax.lax.cond(x[0, 0] > -1, fa, lambda v: v, x)
         return (x, y), None
     return jax.jit(lambda x, y: jax.lax.scan(body, (x, y), None, length=OUTER)[0])
 
