@@ -42,6 +42,7 @@ def _check_positive(obj, names) -> None:
 
 
 CONV_IMPLS = ("matmul", "matmul_patches", "lax")
+DECODERS = ("deconv", "broadcast")  # roll_jax.models.DECODERS
 
 
 # The VAE matching loss's occlusions (roll_jax.losses.OCCLUSIONS implements each).
@@ -112,6 +113,10 @@ class VAEConfig:
     # in docs/training.md ("Convolutions on the CPU"). None (auto): 2 on a CPU backend where the
     # batch splits evenly, else 1 (the whole batch at once; accelerators gain nothing from it).
     grad_parts: int | None = None
+    # Not in the paper: "deconv" is Table 3's decoder (dense -> 3x3x64 -> three transposed
+    # convs); "broadcast" tiles the latent over a grid with coordinate channels (a spatial
+    # broadcast decoder, roll_jax/models.py) before Table 3's last transposed conv.
+    decoder: str = "deconv"
 
     def __post_init__(self):
         _check_positive(self, ("latent_dim", "feature_dim", "batch_size", "lr", "epochs",
@@ -142,6 +147,8 @@ class VAEConfig:
                              f"{self.kl_reference_batch!r}")
         if self.recon_reduction not in ("sum", "mean"):
             raise ValueError(f"VAEConfig.recon_reduction must be 'sum' or 'mean', got {self.recon_reduction!r}")
+        if self.decoder not in DECODERS:
+            raise ValueError(f"VAEConfig.decoder must be one of {DECODERS}, got {self.decoder!r}")
         if self.conv_impl not in CONV_IMPLS:
             raise ValueError(f"VAEConfig.conv_impl must be one of {CONV_IMPLS}, got {self.conv_impl!r}")
 

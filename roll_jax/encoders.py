@@ -52,7 +52,8 @@ class Occlusion:
 
 def vae_model(cfg: VAEConfig) -> ConvVAE:
     return ConvVAE(latent_dim=cfg.latent_dim, feature_dim=cfg.feature_dim,
-                   min_variance=cfg.min_variance, conv_impl=cfg.conv_impl)
+                   min_variance=cfg.min_variance, conv_impl=cfg.conv_impl,
+                   decoder=cfg.decoder)
 
 
 def lstm_model(cfg: LSTMConfig) -> LSTMEncoder:

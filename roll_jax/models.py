@@ -39,6 +39,12 @@ IMAGE_SHAPE = (48, 48, 3)
 _CONV = ((16, 5, 3), (32, 3, 2), (64, 3, 2))  # (filters, kernel, stride), "Network Architectures"
 _DECONV = ((32, 3, 2), (16, 3, 2), (3, 6, 3))
 _FEATURE_MAP = (3, 3, 64)  # 576 = 3*3*64
+# The spatial broadcast decoder (not in the paper; VAEConfig.decoder): the latent tiled over a
+# 19x19 grid with two coordinate channels, two VALID 3x3 convs (19 -> 17 -> 15), then Table 3's
+# last transposed conv (15 -> 48).
+_BROADCAST_GRID = 19
+_BROADCAST_CONV = ((32, 3), (32, 3))
+DECODERS = ("deconv", "broadcast")
 HEAD_INIT_W = 1e-3  # rlkit ConvVAE init_w: the mean / log-variance heads
 
 
@@ -77,8 +83,11 @@ class ConvVAE(nn.Module):
     feature_dim: int = 576
     min_variance: float = 1e-3
     conv_impl: str = "matmul"
+    decoder: str = "deconv"
 
     def setup(self):
+        if self.decoder not in DECODERS:
+            raise ValueError(f"decoder must be one of {DECODERS}, got {self.decoder!r}")
         if self.conv_impl in ("matmul", "matmul_patches"):
             self.convs = [conv.Conv(f, k, s) for f, k, s in _CONV]
             # The 3x3 -> 7x7 layer as col2im: its patch form wastes 3.2x the multiply-adds
@@ -86,11 +95,14 @@ class ConvVAE(nn.Module):
             first = "col2im" if self.conv_impl == "matmul" else "patches"
             self.deconvs = [conv.ConvTranspose(f, k, s, first if i == 0 else "patches")
                             for i, (f, k, s) in enumerate(_DECONV)]
+            self.broadcast_convs = [conv.Conv(f, k) for f, k in _BROADCAST_CONV]
         elif self.conv_impl == "lax":
             self.convs = [nn.Conv(f, (k, k), strides=(s, s), padding="VALID")
                           for f, k, s in _CONV]
             self.deconvs = [nn.ConvTranspose(f, (k, k), strides=(s, s), padding="VALID")
                             for f, k, s in _DECONV]
+            self.broadcast_convs = [nn.Conv(f, (k, k), padding="VALID")
+                                    for f, k in _BROADCAST_CONV]
         else:
             raise ValueError(f"conv_impl must be 'matmul', 'matmul_patches' or 'lax', "
                              f"got {self.conv_impl!r}")
@@ -100,7 +112,8 @@ class ConvVAE(nn.Module):
         head_init = _uniform_init(HEAD_INIT_W)
         self.mean_head = nn.Dense(self.latent_dim, kernel_init=head_init, bias_init=head_init)
         self.logvar_head = nn.Dense(self.latent_dim, kernel_init=head_init, bias_init=head_init)
-        self.dec_fc = nn.Dense(math.prod(_FEATURE_MAP))
+        if self.decoder == "deconv":
+            self.dec_fc = nn.Dense(math.prod(_FEATURE_MAP))
 
     def encode(self, x: jax.Array) -> tuple[jax.Array, jax.Array]:
         """Images [..., 48, 48, 3] (uint8 or float in [0, 1]) -> (mean, logvar) [..., latent]."""
@@ -118,12 +131,16 @@ class ConvVAE(nn.Module):
         """Latents [..., latent] -> Gaussian decoder means [..., 48, 48, 3] (unbounded; the
         data are in [0, 1], clip for display: `encoders.decode` does)."""
         lead = z.shape[:-1]
-        h = nn.relu(self.dec_fc(z.reshape(-1, z.shape[-1])))
-        h = h.reshape((-1,) + _FEATURE_MAP)
-        for i, deconv in enumerate(self.deconvs):
-            h = deconv(h)
-            if i < len(self.deconvs) - 1:
-                h = nn.relu(h)
+        z = z.reshape(-1, z.shape[-1])
+        if self.decoder == "deconv":
+            h = nn.relu(self.dec_fc(z)).reshape((-1,) + _FEATURE_MAP)
+            for deconv in self.deconvs[:-1]:
+                h = nn.relu(deconv(h))
+        else:
+            h = broadcast_grid(z, _BROADCAST_GRID)
+            for c in self.broadcast_convs:
+                h = nn.relu(c(h))
+        h = self.deconvs[-1](h)
         assert h.shape[1:] == IMAGE_SHAPE, h.shape
         return h.reshape(lead + IMAGE_SHAPE)
 
@@ -132,6 +149,17 @@ class ConvVAE(nn.Module):
         mean, logvar = self.encode(x)
         z = mean + jnp.exp(0.5 * logvar) * jax.random.normal(key, mean.shape, mean.dtype)
         return self.decode(z), mean, logvar
+
+
+def broadcast_grid(z: jax.Array, size: int) -> jax.Array:
+    """Latents [B, L] -> [B, size, size, L + 2]: each latent tiled over the grid, with the
+    grid's x and y coordinates in [-1, 1] as two more channels (Watters et al. 2019, "Spatial
+    Broadcast Decoder")."""
+    lin = jnp.linspace(-1.0, 1.0, size, dtype=z.dtype)
+    yy, xx = jnp.meshgrid(lin, lin, indexing="ij")
+    coords = jnp.broadcast_to(jnp.stack([xx, yy], -1), (z.shape[0], size, size, 2))
+    tiled = jnp.broadcast_to(z[:, None, None, :], (z.shape[0], size, size, z.shape[-1]))
+    return jnp.concatenate([tiled, coords], -1)
 
 
 # --- LSTM -------------------------------------------------------------------------------------
