@@ -295,7 +295,9 @@ def _meta(cfg: TrainConfig) -> dict:
                 # The ablations train the object-VAE without its matching loss: a checkpoint
                 # trained with it must not serve them (nor the reverse).
                 "object_matching_coef": None if enc.object_cfg is None
-                else enc.object_cfg.matching_coef}
+                else enc.object_cfg.matching_coef,
+                "scene_decoder": cfg.scene.decoder,
+                "object_decoder": None if enc.object_cfg is None else enc.object_cfg.decoder}
 
 
 def save(path: str, cfg: TrainConfig, pre: Pretrained) -> None:
@@ -332,10 +334,14 @@ def load(path: str, cfg: TrainConfig) -> Pretrained:
             f"per image instead of the reference code's beta / batch (VAEConfig.effective_beta), "
             f"which collapses the object-VAE; pretrain them again")
     want = _meta(cfg)
+    # Checkpoints written before the decoder was a choice have Table 3's.
+    old = {"scene_decoder": "deconv",
+           "object_decoder": None if meta.get("object_latent") is None else "deconv"}
     for k in ("task", "image_shape", "scene_latent", "object_latent", "lstm",
-              "object_matching_coef"):
-        if meta.get(k) != want[k]:
-            raise ValueError(f"encoder checkpoint {path} has {k}={meta.get(k)!r}, but this run "
+              "object_matching_coef", "scene_decoder", "object_decoder"):
+        got = meta.get(k, old.get(k))
+        if got != want[k]:
+            raise ValueError(f"encoder checkpoint {path} has {k}={got!r}, but this run "
                              f"needs {k}={want[k]!r}")
     with ocp.StandardCheckpointer() as ck:
         return ck.restore(os.path.join(path, "encoders"), _abstract(cfg))

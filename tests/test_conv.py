@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from configs.encoders import scene_vae_config
-from roll_jax import conv, encoders
+from roll_jax import conv, encoders, models
 
 # (input size, in channels, out channels, kernel, stride)
 # The ConvVAE's layers, plus a kernel smaller than its stride for the transposed conv (where
@@ -56,8 +56,9 @@ def test_conv_transpose_matches_flax(h, cin, cout, k, s, method):
              conv.ConvTranspose(cout, k, s, method), x)
 
 
-def test_vae_impls_share_parameters_and_values():
-    fast = scene_vae_config("puck_push")
+@pytest.mark.parametrize("decoder", ["deconv", "broadcast"])
+def test_vae_impls_share_parameters_and_values(decoder):
+    fast = scene_vae_config("puck_push", decoder=decoder)
     state = encoders.init_vae(jax.random.PRNGKey(0), fast)
     images = np.random.default_rng(4).integers(0, 256, (4, 48, 48, 3), dtype=np.uint8)
     z = _normal(5, (4, fast.latent_dim))
@@ -72,9 +73,26 @@ def test_vae_impls_share_parameters_and_values():
                                    encoders.decode(state.params, other, z), rtol=1e-5, atol=1e-5)
 
 
+def test_broadcast_grid_tiles_the_latent_beside_its_coordinates():
+    z = _normal(6, (2, 3))
+    g = np.asarray(models.broadcast_grid(jnp.asarray(z), 5))
+    assert g.shape == (2, 5, 5, 5)
+    np.testing.assert_array_equal(g[:, :, :, :3], np.broadcast_to(z[:, None, None], (2, 5, 5, 3)))
+    np.testing.assert_allclose(g[0, 0, :, 3], [-1, -0.5, 0, 0.5, 1])  # x along a row
+    np.testing.assert_allclose(g[1, :, 4, 4], [-1, -0.5, 0, 0.5, 1])  # y down a column
+    np.testing.assert_array_equal(g[0, :, :, 3], g[0, :, :, 4].T)
+    # The decoder has no dense layer of Table 3's: 6 latents + 2 coordinates feed a 3x3 conv.
+    cfg = scene_vae_config("puck_push", decoder="broadcast")
+    params = encoders.init_vae(jax.random.PRNGKey(0), cfg).params["params"]
+    assert "dec_fc" not in params
+    assert params["broadcast_convs_0"]["kernel"].shape == (3, 3, cfg.latent_dim + 2, 32)
+
+
 def test_bad_conv_impl_and_channels_refused():
     with pytest.raises(ValueError, match="conv_impl"):
         dataclasses.replace(scene_vae_config("puck_push"), conv_impl="fft")
+    with pytest.raises(ValueError, match="'mlp'"):
+        scene_vae_config("puck_push", decoder="mlp")
     with pytest.raises(ValueError, match="4 channels"):
         conv.conv_valid(jnp.zeros((1, 8, 8, 4)), jnp.zeros((3, 3, 3, 2)), 1)
     with pytest.raises(ValueError, match="4 channels"):

@@ -304,6 +304,24 @@ def test_encoder_checkpoint_of_full_roll_is_refused_by_the_matching_ablation(tmp
         pretrain.load(str(tmp_path / "enc"), ablated)
 
 
+def test_encoder_checkpoint_of_another_decoder_is_refused(tmp_path):
+    from roll_jax import pretrain
+    from roll_jax.train import build_config
+
+    table3 = build_config("puck_push", "roll", "smoke")
+    broadcast = build_config("puck_push", "roll", "smoke",
+                             overrides=["object_vae.decoder=broadcast"])
+    os.makedirs(tmp_path / "enc")
+    write_meta(str(tmp_path / "enc"), pretrain._meta(broadcast))
+    with pytest.raises(ValueError, match="object_decoder='broadcast'.*needs object_decoder='deconv'"):
+        pretrain.load(str(tmp_path / "enc"), table3)
+    # A checkpoint whose meta predates the choice holds Table 3's decoders.
+    older = {k: v for k, v in pretrain._meta(table3).items() if not k.endswith("_decoder")}
+    write_meta(str(tmp_path / "enc"), older)
+    with pytest.raises(ValueError, match="object_decoder='deconv'.*needs object_decoder='broadcast'"):
+        pretrain.load(str(tmp_path / "enc"), broadcast)
+
+
 def test_encoder_checkpoint_of_the_old_kl_scaling_is_refused(tmp_path):
     from roll_jax import pretrain
 
