@@ -13,6 +13,9 @@ first learns the black background, saturates, and the vanishing sigmoid gradient
 it learn the object (moving-disc test: stuck at the all-black MSE 0.0114; linear reaches 0.001
 in 250 steps at beta=1). `encoders.decode` clips to [0, 1] for display. The log-variance has
 a floor, log(min_variance) + |dense| (reference code; keeps the posterior variance > 0).
+`decoder="broadcast"` (not in the paper) replaces the decoder's dense layer and first two
+transposed convs with a spatial broadcast decoder (`broadcast_grid`, then two 3x3 convs) before
+the last transposed conv; measured in docs/analysis.md ("A spatial broadcast decoder").
 
 LSTMEncoder: g_psi of "Robustness to Object Occlusions", a 2-layer LSTM (hidden 128) over the
 object-VAE latent means, then Dense(out_dim). Auto-encoder target: the paper's equation

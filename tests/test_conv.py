@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from configs.encoders import scene_vae_config
+from configs.encoders import DECODERS, scene_vae_config
 from roll_jax import conv, encoders, models
 
 # (input size, in channels, out channels, kernel, stride)
@@ -86,6 +86,7 @@ def test_broadcast_grid_tiles_the_latent_beside_its_coordinates():
     params = encoders.init_vae(jax.random.PRNGKey(0), cfg).params["params"]
     assert "dec_fc" not in params
     assert params["broadcast_convs_0"]["kernel"].shape == (3, 3, cfg.latent_dim + 2, 32)
+    assert models.DECODERS == DECODERS
 
 
 def test_bad_conv_impl_and_channels_refused():
