@@ -4,10 +4,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from scipy import stats
 
 from configs.encoders import OCCLUSION_SHAPES, LSTMConfig, object_vae_config
-from roll_jax import encoders, losses
+from roll_jax import analysis, encoders, losses
 from roll_jax.models import LSTMEncoder, init_lstm_params, lstm_encode
 
 
@@ -121,14 +120,6 @@ def _random_discs(n: int, seed: int, radius: float = 5.0):
     return jnp.asarray(img), pos
 
 
-def _position_r2(latents, pos) -> float:
-    """R^2 of a least-squares affine fit of the positions from the latents (both axes)."""
-    x = np.concatenate([np.asarray(latents, np.float64), np.ones((len(pos), 1))], 1)
-    coef, *_ = np.linalg.lstsq(x, pos, rcond=None)
-    res = np.sum((x @ coef - pos) ** 2)
-    return float(1.0 - res / np.sum((pos - pos.mean(0)) ** 2))
-
-
 def _fit_discs(cfg, epochs: int = 4):
     """An object-VAE trained `epochs` epochs on 512 random-disc images from `cfg`; its last
     epoch's metrics and its latent means of 256 held-out discs with their positions."""
@@ -151,7 +142,7 @@ def test_object_vae_collapses_only_with_beta_per_image(per_batch_sum):
                             kl_per_batch_sum=per_batch_sum)
     m, mean, test_pos = _fit_discs(cfg)
     kl = float(m["kl"][-20:].mean())
-    r2 = _position_r2(mean, test_pos)
+    r2 = analysis.position_r2(mean, test_pos)
     spread = float(np.max(np.std(mean, 0)))  # against the prior's (and posterior's) std ~1
     print(f"per_batch_sum={per_batch_sum}: KL {kl:.3f} nats, r2 {r2:.3f}, spread {spread:.3f}")
     if per_batch_sum:
@@ -167,10 +158,8 @@ def test_broadcast_decoder_lays_the_positions_out_flat():
     cfg = object_vae_config("puck_push", batch_size=32, batches_per_epoch=100, beta=5.0,
                             matching_coef=0.0, decoder="broadcast")
     _, mean, test_pos = _fit_discs(cfg)
-    pairs = np.triu_indices(len(mean), 1)
-    dz = np.linalg.norm(mean[:, None] - mean[None], axis=-1)[pairs]
-    dp = np.linalg.norm(test_pos[:, None] - test_pos[None], axis=-1)[pairs]
-    r2, rank = _position_r2(mean, test_pos), stats.spearmanr(dz, dp)[0]
+    r2 = analysis.position_r2(mean, test_pos)
+    rank = analysis.pairwise_spearman(mean, test_pos, max_n=len(mean))
     assert r2 > 0.99 and rank > 0.97, (r2, rank)
 
 
