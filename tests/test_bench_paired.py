@@ -41,3 +41,18 @@ def test_compare_refuses_runs_that_do_not_pair(paired):
     assert short["env_steps"] == [0, 1000] and short["evaluations_a_below_b"] == 1
     with pytest.raises(ValueError, match="--from-steps 5000 is past the last evaluation 0"):
         paired.compare(_rows([[0.1]]), _rows([[0.2]]), from_steps=5000)
+
+
+def test_paired_eval_difference_is_per_episode():
+    spec = importlib.util.spec_from_file_location("bench_paired_eval",
+                                                  os.path.join(ROOT, "bench", "paired_eval.py"))
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    b = np.array([[4.0, 8.0, 2.0], [6.0, 3.0, 9.0]])  # [seeds, goals] cm
+    a = b - np.array([[1.0, 2.0, -1.0], [1.0, 1.0, 1.0]])
+    out = mod.difference(a, b)
+    d = np.array([-1.0, -2.0, 1.0, -1.0, -1.0, -1.0])
+    assert out["n"] == 6 and out["share_a_closer"] == pytest.approx(5 / 6)
+    assert out["mean_a_minus_b_cm"] == pytest.approx(d.mean())
+    assert out["standard_error_cm"] == pytest.approx(d.std(ddof=1) / np.sqrt(6))
+    assert out["median_a_minus_b_cm"] == pytest.approx(-1.0)
