@@ -9,7 +9,8 @@ meets the same goal from the same start, so each (seed, goal) is a pair across r
 
     python bench/paired_eval.py --pairs runs/A:runs/B runs/C:runs/D --name NAME
 
-Per run: median and mean final distance (cm), per seed. Per pair A:B, and pooled over the
+Per run: median and mean final distance (cm), per seed, and the shares of episodes ending
+within 3 cm and beyond 10 cm. Per pair A:B, and pooled over the
 pairs: the mean paired difference A - B with its standard error, the median difference, and
 the share of episodes where A ends closer. Writes bench/results/paired_eval_NAME.json.
 """
@@ -58,8 +59,12 @@ def main(argv=None) -> dict:
         runs[run] = {"task": loaded.cfg.task, "env_steps": loaded.epoch * loaded.cfg.epoch_env_steps,
                      "median_cm": float(np.median(dist)), "mean_cm": float(dist.mean()),
                      "mean_cm_per_seed": dist.mean(1).tolist(),
+                     "share_within_3cm": float((dist < 3.0).mean()),
+                     "share_beyond_10cm": float((dist > 10.0).mean()),
                      "final_distance_cm": dist.round(3).tolist()}
-        print(f"{run}: median {runs[run]['median_cm']:.2f} cm, mean {runs[run]['mean_cm']:.2f} cm")
+        print(f"{run}: median {runs[run]['median_cm']:.2f} cm, mean {runs[run]['mean_cm']:.2f} cm, "
+              f"within 3 cm {runs[run]['share_within_3cm']:.0%}, "
+              f"beyond 10 cm {runs[run]['share_beyond_10cm']:.0%}")
     shapes = {run: f.shape for run, f in finals.items()}
     if len(set(shapes.values())) != 1:
         raise SystemExit(f"runs differ in seeds x goals: {shapes}")
