@@ -87,9 +87,10 @@ def encoder_config(cfg, enc_dir: str):
                                                                    decoder=decoder)), decoder
 
 
-def latent_spaces(loaded, enc_dir: str, frames, goal_rgb, online_lstm=None) -> dict:
-    """name -> (achieved [S, G, T+1, d], goal latents [S, G, d]) of one encoder checkpoint;
-    `online_lstm`: a run's [seeds]-batched LSTM parameters trained with these encoders."""
+def latent_spaces(loaded, enc_dir: str, frames, goal_rgb, online_lstm=None) -> tuple[str, dict]:
+    """(the checkpoint's object decoder, {name: (achieved [S, G, T+1, d], goal latents
+    [S, G, d])}) of one encoder checkpoint, on the run's segmentation; `online_lstm`: a run's
+    [seeds]-batched LSTM parameters trained with these encoders."""
     cfg, decoder = encoder_config(loaded.cfg, enc_dir)
     enc = goal_encoder(cfg)
     pre = pretrain.load(enc_dir, cfg)
