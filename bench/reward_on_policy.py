@@ -82,7 +82,7 @@ def rollouts(loaded, n_goals: int, seed: int):
 def encoder_config(cfg, enc_dir: str):
     """The run's config with the object-VAE decoder of the checkpoint at enc_dir."""
     _, meta = read_meta(enc_dir, "encoder")
-    decoder = meta.get("object_decoder", "deconv")
+    decoder = pretrain.meta_decoders(meta)["object_decoder"]
     return dataclasses.replace(cfg, object_vae=dataclasses.replace(cfg.object_vae,
                                                                    decoder=decoder)), decoder
 

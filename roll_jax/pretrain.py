@@ -322,6 +322,14 @@ def _abstract(cfg: TrainConfig) -> Pretrained:
     return jax.eval_shape(lambda: initial(cfg, jax.random.PRNGKey(0)))
 
 
+def meta_decoders(meta: dict) -> dict:
+    """The scene and object decoders an encoder checkpoint's meta records; a checkpoint written
+    before the decoder was a choice has Table 3's ("deconv")."""
+    return {"scene_decoder": meta.get("scene_decoder", "deconv"),
+            "object_decoder": meta.get("object_decoder", None if meta.get("object_latent")
+                                       is None else "deconv")}
+
+
 def load(path: str, cfg: TrainConfig) -> Pretrained:
     """Restore; refuses a checkpoint for another task, image size or latent size."""
     import orbax.checkpoint as ocp
@@ -334,12 +342,10 @@ def load(path: str, cfg: TrainConfig) -> Pretrained:
             f"per image instead of the reference code's beta / batch (VAEConfig.effective_beta), "
             f"which collapses the object-VAE; pretrain them again")
     want = _meta(cfg)
-    # Checkpoints written before the decoder was a choice have Table 3's.
-    old = {"scene_decoder": "deconv",
-           "object_decoder": None if meta.get("object_latent") is None else "deconv"}
+    recorded = {**meta, **meta_decoders(meta)}
     for k in ("task", "image_shape", "scene_latent", "object_latent", "lstm",
               "object_matching_coef", "scene_decoder", "object_decoder"):
-        got = meta.get(k, old.get(k))
+        got = recorded.get(k)
         if got != want[k]:
             raise ValueError(f"encoder checkpoint {path} has {k}={got!r}, but this run "
                              f"needs {k}={want[k]!r}")
