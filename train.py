@@ -127,7 +127,7 @@ def parse_args(argv=None):
         from roll_jax.train import check_resume
 
         try:
-            check_resume(out, cfg)
+            check_resume(out, cfg, a.seed)
         except ValueError as e:
             p.error(str(e))
     return a, cfg, out

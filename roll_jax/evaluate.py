@@ -55,12 +55,9 @@ class LoadedRun:
 def input_paths(run: str) -> dict:
     """Where the run's segmentation and encoders are: DIR/inputs.json (written by the run:
     its --seg-ckpt / --enc-ckpt, or its own sub-directories)."""
-    path = os.path.join(run, run_dir.INPUTS)
-    if os.path.exists(path):
-        with open(path) as f:
-            return json.load(f)
-    return {"seg_ckpt": os.path.join(run, "segmentation"),
-            "enc_ckpt": os.path.join(run, "encoders")}
+    inputs = run_dir.read_inputs(run)
+    return {"seg_ckpt": inputs.get("seg_ckpt", os.path.join(run, "segmentation")),
+            "enc_ckpt": inputs.get("enc_ckpt", os.path.join(run, "encoders"))}
 
 
 def load_run(run: str, seg_ckpt: str | None = None, enc_ckpt: str | None = None) -> LoadedRun:

@@ -132,16 +132,16 @@ def plan(a) -> list[Cell]:
     return cells
 
 
-def check_existing(cells: list[Cell]) -> None:
-    """A run dir that holds another config (finished or not) is never touched: refuse the
-    whole grid before anything runs."""
+def check_existing(cells: list[Cell], seed: int | None = None) -> None:
+    """A run dir that holds another config or base seed (finished or not) is never touched:
+    refuse the whole grid before anything runs."""
     for c in cells:
         if os.path.exists(os.path.join(c.out, "config.json")):
             try:
-                train.check_resume(c.out, c.cfg)
+                train.check_resume(c.out, c.cfg, seed)
             except ValueError as e:
                 state = "finished" if train.is_complete(c.out) else "unfinished"
-                raise ValueError(f"{c.out} holds a {state} run of another config ({e}); use "
+                raise ValueError(f"{c.out} holds a {state} run made with other settings ({e}); use "
                                  f"another --out or the same settings") from None
 
 
@@ -422,7 +422,7 @@ def main(argv=None, run_fn=None, pool=None) -> int:
     a, p = parse_args(argv)
     try:
         cells = plan(a)
-        check_existing(cells)
+        check_existing(cells, a.seed)
         if not (a.report_only or a.dry_run):
             from roll_jax import sharding
 

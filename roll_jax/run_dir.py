@@ -8,7 +8,8 @@ what is in it and how each file is written and read.
     ckpt/            orbax checkpoints of the whole train state (roll_jax/checkpoint.py)
     segmentation/, encoders/   the fitted segmentation and pre-trained encoders
     inputs.json      where the segmentation and encoders the run used are (its own
-                     sub-directories, or the --seg-ckpt / --enc-ckpt it was given)
+                     sub-directories, or the --seg-ckpt / --enc-ckpt it was given) and its
+                     base seed (--seed)
     timings.json     wall and CPU seconds per phase
     complete.json    written last, atomically, when the run reached its last epoch
 """
@@ -61,11 +62,20 @@ def read_config(out: str) -> TrainConfig:
         return config_from_json(json.load(f))
 
 
-def write_inputs(out: str, seg_ckpt: str | None, enc_ckpt: str | None) -> None:
+def write_inputs(out: str, seg_ckpt: str | None, enc_ckpt: str | None, seed: int) -> None:
     with open(os.path.join(out, INPUTS), "w") as f:
         json.dump({"seg_ckpt": os.path.abspath(seg_ckpt or os.path.join(out, "segmentation")),
-                   "enc_ckpt": os.path.abspath(enc_ckpt or os.path.join(out, "encoders"))},
-                  f, indent=2)
+                   "enc_ckpt": os.path.abspath(enc_ckpt or os.path.join(out, "encoders")),
+                   "seed": int(seed)}, f, indent=2)
+
+
+def read_inputs(out: str) -> dict:
+    """inputs.json of a run, or {} where the run has none."""
+    path = os.path.join(out, INPUTS)
+    if not os.path.exists(path):
+        return {}
+    with open(path) as f:
+        return json.load(f)
 
 
 def write_rows(csv_path: str, rows: list[dict]) -> None:

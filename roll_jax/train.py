@@ -110,8 +110,10 @@ def build_config(task: str, algo: str, preset: str, seeds: int = 1, overrides=()
     return make_config(task, algo, preset, **top)
 
 
-def check_resume(out: str, cfg: TrainConfig) -> None:
-    """A resumed run must have the same config as the command line (before any compile)."""
+def check_resume(out: str, cfg: TrainConfig, seed: int | None = None) -> None:
+    """A resumed run must have the same config as the command line (before any compile), and
+    the same base seed where both are known (`seed` None, or a run written before inputs.json
+    held its seed: not checked)."""
     path = os.path.join(out, "config.json")
     if not os.path.exists(path):
         raise ValueError(f"--resume: no run to resume in {out} (missing config.json)")
@@ -127,6 +129,10 @@ def check_resume(out: str, cfg: TrainConfig) -> None:
         k = diff[0]
         raise ValueError(f"--resume: config of {out} differs from the command line in {k!r}: "
                          f"saved {saved.get(k)!r}, now {now.get(k)!r}")
+    saved_seed = run_dir.read_inputs(out).get("seed")
+    if seed is not None and saved_seed is not None and int(seed) != int(saved_seed):
+        raise ValueError(f"--resume: {out} was trained with --seed {saved_seed}, the command "
+                         f"line gives --seed {seed}")
 
 
 def check_given(**paths) -> None:
@@ -225,7 +231,7 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
     import envs_mjx
 
     if resume:
-        check_resume(out, cfg)
+        check_resume(out, cfg, seed)
     sharding = shd.make(devices, cfg.seeds)  # the divisibility error comes before any compile
     n_devices = 1 if sharding is None else sharding.n_devices
     per_device = shd.resolve_seed_batch(seed_batch, cfg.seeds, n_devices)
@@ -237,7 +243,7 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
         if os.path.exists(marker):  # being redone or continued: not complete until the end
             os.remove(marker)
         run_dir.write_config(out, cfg)
-        run_dir.write_inputs(out, seg_ckpt, enc_ckpt)
+        run_dir.write_inputs(out, seg_ckpt, enc_ckpt, seed)
 
     times = PhaseTimes()  # this process's phases -> timings.json
     t_run, c_run = time.perf_counter(), time.process_time()

@@ -23,6 +23,7 @@ class FakeRun:
         os.makedirs(out, exist_ok=True)
         with open(os.path.join(out, "config.json"), "w") as f:
             json.dump(run_dir.config_json(cfg), f)
+        run_dir.write_inputs(out, seg_ckpt, None, seed)
         _write_metrics(out, {1000: [0.5] * cfg.seeds})
         with open(os.path.join(out, train.COMPLETE_MARKER), "w") as f:
             f.write("{}")
@@ -93,9 +94,23 @@ def test_refuses_dir_of_other_config(tmp_path, capsys):
     with pytest.raises(SystemExit):
         reproduce.main(_args(out, "--tasks", "puck_push", "--seeds", "2"), run_fn=fake)
     err = capsys.readouterr().err
-    assert "holds a finished run of another config" in err and "'seeds'" in err
+    assert "holds a finished run made with other settings" in err and "'seeds'" in err
     assert fake.calls == []
     assert (out / "runs/puck_push__skewfit/config.json").read_text() == before
+
+
+def test_refuses_dir_of_other_base_seed(tmp_path, capsys):
+    """The same config from another base seed is another run: refused, naming both seeds."""
+    out = tmp_path / "grid"
+    assert reproduce.main(_args(out, "--tasks", "puck_push", "--algos", "skewfit"),
+                          run_fn=FakeRun()) == 0
+    fake = FakeRun()
+    with pytest.raises(SystemExit):
+        reproduce.main(_args(out, "--tasks", "puck_push", "--algos", "skewfit", "--seed", "1"),
+                       run_fn=fake)
+    err = capsys.readouterr().err
+    assert "was trained with --seed 0, the command line gives --seed 1" in err
+    assert fake.calls == []
 
 
 def test_skips_finished_resumes_unfinished(tmp_path):

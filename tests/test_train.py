@@ -107,6 +107,12 @@ def test_resume_refuses_other_config(runs, tmp_path):
         train.check_resume(full, tiny(n_eval_goals=3))
     with pytest.raises(ValueError, match="no run to resume"):
         train.check_resume(str(tmp_path), tiny())
+    # The base seed is a run's input too (inputs.json); unknown (None) is not checked.
+    train.check_resume(full, tiny(), seed=0)
+    train.check_resume(full, tiny(), seed=None)
+    with pytest.raises(ValueError, match="was trained with --seed 0, the command line gives "
+                                         "--seed 3"):
+        train.check_resume(full, tiny(), seed=3)
 
 
 def test_resume_accepts_a_run_written_before_a_field_existed(tmp_path):
@@ -118,6 +124,7 @@ def test_resume_accepts_a_run_written_before_a_field_existed(tmp_path):
     with open(tmp_path / "config.json", "w") as f:
         json.dump(saved, f)
     train.check_resume(str(tmp_path), cfg)  # the default is the old behaviour: same run
+    train.check_resume(str(tmp_path), cfg, seed=5)  # no inputs.json: its seed is unknown
     other = dataclasses.replace(cfg, object_vae=dataclasses.replace(cfg.object_vae,
                                                                     occlusion_shape="edge"))
     with pytest.raises(ValueError, match="differs from the command line in 'object_vae'"):
@@ -304,7 +311,7 @@ def test_run_records_its_inputs(runs):
     with open(os.path.join(part, run_dir.INPUTS)) as f:
         inputs = json.load(f)
     assert inputs == {"seg_ckpt": os.path.join(full, "segmentation"),
-                      "enc_ckpt": os.path.join(full, "encoders")}
+                      "enc_ckpt": os.path.join(full, "encoders"), "seed": 0}
     with pytest.raises(FileNotFoundError, match="enc_ckpt"):
         train.setup(_cfg, None, jax.random.PRNGKey(0), part, enc_ckpt=os.path.join(part, "nope"))
     with pytest.raises(FileNotFoundError, match="seg_ckpt"):
