@@ -232,22 +232,32 @@ def _wgrad_input_major(res, g):
         res, g, lambda g, taps: [jnp.einsum("bhwc,bhwf->cf", x, g) for x in taps])
 
 
+def _wgrad_input_taps(res, g):
+    """`unet.conv_dot_wgrad`'s backward with every kernel gradient from the input's shifted
+    slices (the A/B reference of `unet_wgrad_ab` for the default's thinner-operand taps)."""
+    return unet.conv_backward(res, g, shift_output=False)
+
+
 def unet_wgrad_ab(steps: int, rounds: int) -> dict:
     """The U-Net train step (widths 8 and 16, batch 32) with the kernel gradient as
-    `conv.weight_gradient` (g^T x, the default) against x^T g, interleaved in `rounds` rounds in
-    one process."""
+    `conv.weight_gradient` dots over the taps of the thinner operand (the default) against the
+    same dots over the input's taps in every layer, and against x^T g (autodiff's contraction,
+    thinner taps), interleaved in `rounds` rounds in one process."""
     out = {}
     for features in (8, 16):
         timers = {"g_major": unet_step_timer(features, 32, steps, True)[0]}
         timers["g_major"]()  # traced with the default backward first
-        timers["x_major"] = traced_with_backward(
-            unet.conv_dot_wgrad, unet._conv_fwd, _wgrad_input_major, unet.conv_backward,
-            lambda f=features: unet_step_timer(f, 32, steps, True)[0])
+        for name, bwd in (("x_major", _wgrad_input_major), ("input_taps", _wgrad_input_taps)):
+            timers[name] = traced_with_backward(
+                unet.conv_dot_wgrad, unet._conv_fwd, bwd, unet.conv_backward,
+                lambda f=features: unet_step_timer(f, 32, steps, True)[0])
         out[f"width_{features}"] = res = interleaved(timers, steps, rounds)
         med = res["median_ms"]
         res["x_major_over_g_major"] = med["x_major"] / med["g_major"]
-        print(f"  U-Net width {features}: g^T x {med['g_major']:.1f} ms, x^T g "
-              f"{med['x_major']:.1f} ms (median of {rounds} interleaved rounds)", flush=True)
+        res["input_taps_over_g_major"] = med["input_taps"] / med["g_major"]
+        print(f"  U-Net width {features}: g^T x over the thinner taps {med['g_major']:.1f} ms, "
+              f"over the input's taps {med['input_taps']:.1f} ms, x^T g {med['x_major']:.1f} ms "
+              f"(median of {rounds} interleaved rounds)", flush=True)
     return out
 
 
@@ -381,7 +391,7 @@ def main(argv=None):
                    help="only the VAE steps' forms (`conv_forms_ab`), interleaved in ROUNDS rounds "
                         "(writes bench/results/conv_forms.json)")
     p.add_argument("--unet-ab", type=int, metavar="ROUNDS", default=0,
-                   help="only the U-Net train step's two kernel-gradient contractions, "
+                   help="only the U-Net train step's kernel-gradient forms, "
                         "interleaved in ROUNDS rounds (writes bench/results/unet_wgrad_order.json)")
     p.add_argument("--out", default=None)
     a = p.parse_args(argv)

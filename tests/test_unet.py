@@ -135,11 +135,12 @@ def test_batchnorm_train_updates_stats_eval_keeps_them(state):
 
 
 @pytest.mark.parametrize("k", [3, 1])
-def test_conv_dot_wgrad_matches_autodiff(k):
+@pytest.mark.parametrize("cin,cout", [(3, 5), (5, 3)])  # input taps / output-gradient taps
+def test_conv_dot_wgrad_matches_autodiff(k, cin, cout):
     rng = np.random.default_rng(3)  # numpy data: a jax.random draw compiles per shape
-    x = rng.standard_normal((2, 16, 16, 3), dtype=np.float32)
-    kernel = rng.standard_normal((k, k, 3, 5), dtype=np.float32)
-    g = rng.standard_normal((2, 16, 16, 5), dtype=np.float32)
+    x = rng.standard_normal((2, 16, 12, cin), dtype=np.float32)
+    kernel = rng.standard_normal((k, k, cin, cout), dtype=np.float32)
+    g = rng.standard_normal((2, 16, 12, cout), dtype=np.float32)
 
     @jax.jit
     def both(x, kernel):
