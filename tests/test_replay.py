@@ -190,3 +190,44 @@ def test_sample_trajectories_and_images():
     px = np.asarray(sample_images(buf, jax.random.key(3), 4000,
                                   skewfit.weights_cdf(w, buf.size))[:, 0, 0, 0])
     assert set(px) == {0, 25} and abs(np.mean(px == 0) - 0.75) < 0.03
+
+
+@pytest.mark.parametrize("n_updates, ahead", [(6, 32), (6, 4), (5, 2)])
+def test_sac_steps_draw_ahead_equals_drawing_before_each_update(monkeypatch, n_updates, ahead):
+    """`loop.sac_steps` draws its HER batches ahead, `ahead` updates at a time (one block of 6;
+    blocks of 3 (the largest divisor <= 4); blocks of 1 for 5): the same training as drawing
+    each batch just before its update."""
+    import dataclasses
+
+    from configs.train import make_config
+    from roll_jax import loop, sac
+    from roll_jax.goal_encoding import goal_encoder
+
+    cfg = make_config("puck_push", "roll", "smoke")
+    cfg = dataclasses.replace(cfg, sac=dataclasses.replace(cfg.sac, batch_size=16,
+                                                           hidden=(8, 8)))
+    enc = goal_encoder(cfg)
+    buf = replay.add_trajectories(replay.init_buffer(CAP, T, (HW, HW, 3), A, DS, DG, DG),
+                                  _trajs(4, 0))
+    bank = jax.random.normal(jax.random.PRNGKey(5), (64, DG))
+    state = sac.init_sac(jax.random.PRNGKey(6), DS, DG, A, cfg.sac)
+    key = jax.random.PRNGKey(7)
+
+    def one_by_one(s):
+        def body(s, k):
+            k_goal, k_batch, k_upd = jax.random.split(k, 3)
+            fresh = loop.fresh_goals(enc, buf, None, k_goal, 16, bank)
+            batch = replay.sample_transitions(buf, k_batch, 16, fresh, cfg.sac.goal_fracs,
+                                              cfg.reward_norm)
+            s, m = sac.sac_update(s, k_upd, batch, cfg.sac)
+            m["reward"] = batch.reward.mean()
+            return s, m
+        new, m = jax.lax.scan(body, s, jax.random.split(key, n_updates))
+        return new, jax.tree.map(jnp.mean, m)
+
+    monkeypatch.setattr(loop, "SAMPLE_AHEAD", ahead)
+    got = jax.jit(lambda s: loop.sac_steps(cfg, enc, s, buf, None, key, n_updates, bank))(state)
+    want = jax.jit(one_by_one)(state)
+    assert int(got[0].step) == n_updates
+    for a, b in zip(jax.tree.leaves(got), jax.tree.leaves(want)):
+        np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-6)
