@@ -58,7 +58,7 @@ def main(argv=None) -> None:
                "analysis_s": round(t_an, 1),
                "segmentation": {k: seg.get(k) for k in seg if not isinstance(seg[k], list)},
                **{k: v for k, v in res.items() if k not in ("png", "json")}}
-        rows = [r for r in rows if not (r["task"] == task and r.get("seed") == a.seed)] + [row]
+        rows.append(row)  # every run kept: a row names its machine and segmentation
         with open(RESULTS, "w") as f:
             json.dump(rows, f, indent=2)
         shutil.copy(res["png"], os.path.join(ROOT, "docs", "images",
