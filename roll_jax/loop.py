@@ -384,39 +384,21 @@ def store_episodes(state: TrainState, traj: replay.Trajectory, log_p) -> TrainSt
                          skew_log_p=state.skew_log_p.at[slots].set(log_p.astype(jnp.float32)))
 
 
-SAMPLE_AHEAD = 32  # updates whose HER batches are drawn at once (the buffer is fixed meanwhile)
-
-
 def sac_steps(cfg: TrainConfig, enc: GoalEncoder, sac_state: sac.SACState,
               buffer: replay.ReplayBuffer, cdf, key, n_updates: int, prior=None):
     """`n_updates` SAC updates on HER batches from `buffer` -> (SAC state, mean metrics); the
-    fresh-goal share is drawn per batch by `fresh_goals` (`cdf`: Skew-Fit's, or None).
+    fresh-goal share is drawn per batch by `fresh_goals` (`cdf`: Skew-Fit's, or None)."""
 
-    The buffer does not change during the updates, so the batches of up to `SAMPLE_AHEAD`
-    updates are drawn at once (vmapped over their keys: the same batches as drawing each before
-    its update) and the updates then scan over them: one vectorised gather instead of a chain
-    of small ones between the updates."""
-    b = cfg.sac.batch_size
-    block = max(d for d in range(1, min(SAMPLE_AHEAD, n_updates) + 1) if n_updates % d == 0)
-
-    def draw(k):
+    def body(s, k):
         k_goal, k_batch, k_upd = jax.random.split(k, 3)
-        fresh = fresh_goals(enc, buffer, cdf, k_goal, b, prior)
-        return k_upd, replay.sample_transitions(buffer, k_batch, b, fresh, cfg.sac.goal_fracs,
-                                                cfg.reward_norm)
-
-    def update(s, k_batch):
-        k_upd, batch = k_batch
+        fresh = fresh_goals(enc, buffer, cdf, k_goal, cfg.sac.batch_size, prior)
+        batch = replay.sample_transitions(buffer, k_batch, cfg.sac.batch_size, fresh,
+                                          cfg.sac.goal_fracs, cfg.reward_norm)
         s, m = sac.sac_update(s, k_upd, batch, cfg.sac)
         m["reward"] = batch.reward.mean()
         return s, m
 
-    def blocks(s, keys):
-        return jax.lax.scan(update, s, jax.vmap(draw)(keys))
-
-    keys = jax.random.split(key, n_updates)
-    keys = keys.reshape((n_updates // block, block) + keys.shape[1:])
-    new, metrics = jax.lax.scan(blocks, sac_state, keys)
+    new, metrics = jax.lax.scan(body, sac_state, jax.random.split(key, n_updates))
     return new, jax.tree.map(jnp.mean, metrics)
 
 
