@@ -73,7 +73,7 @@ def conv_backward(res, g, tap_gradients=tap_weight_gradients, shift_output: bool
     """(dx, dkernel) of `conv_dot_wgrad`: the input gradient as a conv with the flipped kernel;
     the kernel gradient by `tap_gradients` from the k*k shifted slices of the output gradient
     (``shift_output``) or of the input; None: of the thinner of the two (slicing copies them,
-    the thinner copies less: -10% on the width-8 U-Net's train step, docs/training.md).
+    the thinner copies less: -11% on the width-8 U-Net's train step, docs/training.md).
 
     Tap (i, j) of the kernel gradient is ``sum_y x[y + d] g[y]`` with ``d = (i, j) - k // 2`` and
     zeros outside the image, which is also ``sum_z x[z] g[z - d]``: either ``x`` or ``g`` can
