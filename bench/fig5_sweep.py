@@ -7,7 +7,7 @@ run in bench/results/fig5_sweep_cpu_preset.json (written after every run, so a c
 keeps what it measured).
 
     python bench/fig5_sweep.py --runs 3:500 4:500 0:200 0:1000
-    python bench/fig5_sweep.py --ckpt pickup=runs/enc_cpu_y/pickup --tasks pickup --runs 5:500
+    python bench/fig5_sweep.py --ckpt pickup=runs/enc_cpu_x/pickup --tasks pickup --runs 5:500
 """
 from __future__ import annotations
 
@@ -24,8 +24,7 @@ from bench.common import cpu_model, last_json, run_module  # noqa: E402
 RESULTS = os.path.join(ROOT, "bench", "results", "fig5_sweep_cpu_preset.json")
 TASKS = ("puck_push", "hurdle_bottom", "hurdle_top", "door_open", "pickup")
 # The cpu preset's committed encoders (docs/analysis.md, "The cpu preset as committed").
-CKPTS = {**{t: os.path.join("runs", "enc_cpu_x", t) for t in TASKS},
-         "pickup": os.path.join("runs", "enc_cpu_y", "pickup")}
+CKPTS = {t: os.path.join("runs", "enc_cpu_z", t) for t in TASKS}
 
 
 def _pair(text: str) -> tuple[int, int]:
