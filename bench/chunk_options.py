@@ -5,7 +5,14 @@ Each setting runs in a fresh process (no compilation cache), the settings altern
 `--rounds`: the cpu preset's ROLL chunk on puck_push, as `bench/train.py`'s
 `sac_share_in_chunk` builds and times it (one refresh cycle of steady-state plans).
 
+`--without OPTION` instead weighs one option of the chunk's: one process compiles the chunk
+with all of them and without OPTION, then runs each plan of `--rounds` refresh cycles on both
+programs, SAC on and off, the order of programs and of on/off flipped every other plan, so
+that both see the same machine (its speed drifts by 10-30% over minutes).
+
     python bench/chunk_options.py [--rounds 1]      # ~3 min per setting and round on 2 cores
+    python bench/chunk_options.py --without xla_cpu_experimental_ynn_fusion_type --rounds 3 \
+        --out bench/results/chunk_options_without_ynn.json
 
 Writes bench/results/chunk_compiler_options.json.
 """
@@ -21,7 +28,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 sys.path.insert(0, ROOT)
 
-from common import write_results  # noqa: E402
+from common import cpu_model, write_results  # noqa: E402
 
 SETTINGS = ("xla_defaults", "chunk_options")
 _CHILD = """
@@ -50,14 +57,87 @@ def one(setting: str) -> dict:
     return {"setting": setting, **json.loads(lines[-1][len("RESULT "):])}
 
 
+def without(option: str, rounds: int) -> dict:
+    """The chunk with all of its options ("all") and without `option`, in this process:
+    per program its compile, and per plan its chunk time with SAC on and off."""
+    import statistics
+
+    import jax
+    import jax.numpy as jnp
+
+    import importlib.util
+
+    import envs_mjx
+    from roll_jax import compile_cache, loop, sharding
+
+    spec = importlib.util.spec_from_file_location("bench_train", os.path.join(HERE, "train.py"))
+    bench_train = importlib.util.module_from_spec(spec)  # bench/train.py, not the CLI
+    spec.loader.exec_module(bench_train)
+
+    full = loop.CHUNK_CPU_COMPILER_OPTIONS
+    if option not in dict(full):
+        raise SystemExit(f"--without {option}: not one of the chunk's options {sorted(dict(full))}")
+    variants = {"all": full, "without": tuple(kv for kv in full if kv[0] != option)}
+    a = argparse.Namespace(task="puck_push", preset="cpu", replay_size=None, chunks=1,
+                           n_envs=None, epoch_env_steps=None)
+    base = bench_train.make_config("puck_push", "roll", "cpu")
+    a.n_envs, a.epoch_env_steps = base.n_envs, base.epoch_env_steps
+    cfg = bench_train.make_cfg(a, 1)
+    env = envs_mjx.make("puck_push")
+    k_fz, k_init = jax.random.split(jax.random.PRNGKey(0))
+    frozen, scene_vae, lstm = bench_train.fresh_frozen_and_pretrained(cfg, k_fz)
+    init = jax.jit(jax.vmap(lambda k: loop.init_state(k, cfg, env, scene_vae, lstm)))
+    plans = [loop.plan_chunk(cfg, e) for e in range(20, 20 + cfg.refresh_every_epochs)]
+    seed_batch = sharding.resolve_seed_batch("auto", 1)
+    progs, states, out = {}, {}, {}
+    for name, opts in variants.items():
+        chunk = jax.jit(sharding.over_seeds(loop.make_chunk(cfg, env, True), 1, 1, seed_batch),
+                        donate_argnums=0, compiler_options=compile_cache.accepted_options(opts))
+        st = init(jax.random.split(k_init, 1))
+        progs[name], lower_s, compile_s = bench_train._compile(chunk, st, frozen, plans[0])
+        (states[name], _), _, _ = bench_train._call(progs[name], st, frozen, plans[0])
+        out[name] = {"options": dict(opts), "lower_s": lower_s, "compile_s": compile_s,
+                     "on_s": [], "off_s": []}
+        print(f"  {name:8s} trace+lower {lower_s:5.1f} s  compile {compile_s:5.1f} s", flush=True)
+    n_updates = cfg.epoch_env_steps * cfg.sac.updates_per_step
+    for i, plan in enumerate(plans * rounds):
+        flip = i % 2 == 1
+        for name in (reversed(variants) if flip else variants):
+            for switch in (("off", "on") if flip else ("on", "off")):
+                pl = plan if switch == "on" else plan.replace(learn=jnp.bool_(False))
+                (states[name], _), wall, _ = bench_train._call(progs[name], states[name],
+                                                                frozen, pl)
+                out[name][f"{switch}_s"].append(wall)
+        print(f"  plan {i}: " + "  ".join(f"{n} {out[n]['on_s'][-1]:.2f} / {out[n]['off_s'][-1]:.2f} s"
+                                          for n in variants), flush=True)
+    for name, r in out.items():
+        sac = [1e3 * (x - y) / n_updates for x, y in zip(r["on_s"], r["off_s"])]
+        r.update(chunk_s_mean=statistics.mean(r["on_s"]), chunk_s_median=statistics.median(
+            r["on_s"]), sac_off_s_median=statistics.median(r["off_s"]),
+            sac_ms_per_update_median=statistics.median(sac))
+        r["chunk_over_sac"] = r["chunk_s_median"] / (r["sac_ms_per_update_median"] * n_updates / 1e3)
+        print(f"  {name:8s} chunk mean {r['chunk_s_mean']:.2f} s, median {r['chunk_s_median']:.2f}"
+              f" s (SAC off {r['sac_off_s_median']:.2f} s); SAC {r['sac_ms_per_update_median']:.2f}"
+              f" ms per update; chunk / its SAC {r['chunk_over_sac']:.2f}", flush=True)
+    return {"without": option, "rounds": rounds, "plans_per_round": len(plans),
+            "sac_updates_per_chunk": n_updates, "programs": out}
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--rounds", type=int, default=1)
+    p.add_argument("--without", metavar="OPTION",
+                   help="weigh this one of the chunk's options in one process (see above)")
     p.add_argument("--out", default=os.path.join(HERE, "results", "chunk_compiler_options.json"))
     a = p.parse_args(argv)
     if a.rounds < 1:
         p.error(f"--rounds must be >= 1, got {a.rounds}")
+    if a.without:
+        res = without(a.without, a.rounds)
+        write_results(a.out, {"what": __doc__.split("\n\n")[0], "task": "puck_push",
+                              "preset": "cpu", "cpu_model": cpu_model(), **res})
+        return
     runs = []
     for r in range(a.rounds):
         for setting in SETTINGS:

@@ -50,17 +50,20 @@ def xla_flags_refusal(flags: str) -> str | None:
 
 @functools.lru_cache(maxsize=None)
 def accepted_options(options: tuple[tuple[str, object], ...]) -> dict | None:
-    """`options` as the dict `jax.jit(..., compiler_options=...)` takes, if this jaxlib
-    compiles a tiny program with them; else None, with a warning that names them (XLA refuses
-    an option it does not know, and option names change between XLA versions)."""
+    """The options of `options` that this jaxlib compiles a tiny program with, as the dict
+    `jax.jit(..., compiler_options=...)` takes (None if it accepts none of them). Each option is
+    tried on its own, and each refused one is dropped with a warning that names it: XLA refuses
+    an option it does not know, and option names change between XLA versions."""
     import jax
     import jax.numpy as jnp
 
-    opts = dict(options)
-    try:
-        jax.jit(lambda x: x + 1, compiler_options=opts).lower(jnp.zeros(1)).compile()
-    except Exception as e:  # noqa: BLE001  (the error type differs between jaxlib versions)
-        warnings.warn(f"XLA refused the compiler options {opts} ({str(e)[:200]}); "
-                      "compiling with XLA's defaults instead", stacklevel=2)
-        return None
-    return opts
+    kept = {}
+    for name, value in options:
+        try:
+            jax.jit(lambda x: x + 1, compiler_options={name: value}).lower(jnp.zeros(1)).compile()
+        except Exception as e:  # noqa: BLE001  (the error type differs between jaxlib versions)
+            warnings.warn(f"XLA refused the compiler option {name}={value!r} ({str(e)[:200]}); "
+                          "compiling without it", stacklevel=2)
+            continue
+        kept[name] = value
+    return kept or None

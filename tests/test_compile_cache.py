@@ -13,15 +13,23 @@ def test_accepted_options_keeps_known_and_refuses_unknown_with_a_warning():
     assert opts == dict(loop.CHUNK_CPU_COMPILER_OPTIONS)
     with pytest.warns(UserWarning, match="xla_no_such_option"):
         assert compile_cache.accepted_options((("xla_no_such_option", 1),)) is None
+    # one refused option costs only itself
+    with pytest.warns(UserWarning, match="xla_no_such_option_either"):
+        assert compile_cache.accepted_options((("xla_backend_optimization_level", 1),
+                                               ("xla_no_such_option_either", 1))) == {
+            "xla_backend_optimization_level": 1}
 
 
 def test_chunk_options_leave_what_xla_flags_sets_to_xla_flags(monkeypatch):
     monkeypatch.setenv("XLA_FLAGS", "")
     assert loop.chunk_compiler_options() == dict(loop.CHUNK_CPU_COMPILER_OPTIONS)
     monkeypatch.setenv("XLA_FLAGS", "--xla_backend_optimization_level=2")
-    assert loop.chunk_compiler_options() == {"xla_cpu_use_fusion_emitters": False}
-    monkeypatch.setenv("XLA_FLAGS", "--xla_cpu_use_fusion_emitters=true "
-                                    "--xla_backend_optimization_level=2")
+    want = {k: v for k, v in loop.CHUNK_CPU_COMPILER_OPTIONS
+            if k != "xla_backend_optimization_level"}
+    assert loop.chunk_compiler_options() == want
+    monkeypatch.setenv("XLA_FLAGS", " ".join(f"--{k}={v}" for k, v in (
+        ("xla_cpu_use_fusion_emitters", "true"), ("xla_backend_optimization_level", 2),
+        ("xla_cpu_experimental_ynn_fusion_type", ""))))
     assert loop.chunk_compiler_options() is None
 
 
