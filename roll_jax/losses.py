@@ -133,13 +133,18 @@ def lstm_loss(params: Any, model: LSTMEncoder, latents: jax.Array,
     if latents.ndim != 3:
         raise ValueError(f"latents must be [B, T, d], got shape {latents.shape}")
     latents = jax.lax.stop_gradient(latents.astype(jnp.float32))
-    z = lstm_encode(params, latents, model=model)
+    if occ_latent is None:
+        z = lstm_encode(params, latents, model=model)
+    else:
+        occ_seq = insert_occlusion(latents, jax.lax.stop_gradient(occ_latent), occ_t)
+        # Clean and occluded sequences through one scan: the LSTM's steps are sequential and
+        # small, so on a CPU a step's cost barely depends on the batch (docs/training.md).
+        z, z_occ = jnp.split(lstm_encode(params, jnp.concatenate([latents, occ_seq]),
+                                         model=model), 2)
     ae = jnp.mean(jnp.sum(jnp.square(z - latents), axis=-1))
     loss = ae_coef * ae
     metrics = {"ae": ae}
     if occ_latent is not None:
-        occ_seq = insert_occlusion(latents, jax.lax.stop_gradient(occ_latent), occ_t)
-        z_occ = lstm_encode(params, occ_seq, model=model)
         window = (jnp.arange(latents.shape[1])[None, :] >= occ_t[:, None]).astype(jnp.float32)
         per_step = matching_distance(z, z_occ, one_sided)  # [B, T]
         match = jnp.mean(jnp.sum(per_step * window, 1) / jnp.maximum(jnp.sum(window, 1), 1.0))
