@@ -19,6 +19,8 @@
      policy    the acting policy (sac.select_action, batch n_envs) per step;
      SAC       `loop.sac_updates`: epoch_env_steps x updates_per_step updates at the config's
                batch size on the replay buffer the timed chunks filled;
+     lstm      --lstm-batches online LSTM batches on that buffer and the goal-latent refresh
+               (nothing with --lstm-batches 0);
    the shares are of the sum of these parts. "collect" (`loop.collect_episode` per episode,
    the chunk's collection phase as one function, without the replay write) is timed too,
    for comparison (--no-collect skips it).
@@ -61,12 +63,12 @@ import jax.numpy as jnp
 import envs_mjx
 from configs.presets import PRESETS
 from configs.train import make_config
-from roll_jax import encoders, loop, sac, sharding, skewfit
+from roll_jax import encoders, loop, online_training, sac, sharding, skewfit
 from roll_jax.goal_encoding import Frozen, goal_encoder
 from roll_jax.segmentation import mog2, pipeline, unet
 
 RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "train.json")
-PARTS = ("sim", "render", "segment", "encoders", "log_p", "policy", "sac")
+PARTS = ("sim", "render", "segment", "encoders", "log_p", "policy", "sac", "lstm")
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -235,8 +237,9 @@ def sac_share_in_chunk(task: str, preset: str, first_epoch: int = 20, seeds: int
 
 # ----------------------------------------------------------------------------- the parts
 
-def part_functions(cfg, env, frozen):
-    """The chunk's parts as seed-vmapped jitted functions (argument layouts in the comments)."""
+def part_functions(cfg, env, frozen, lstm_batches: int = 0):
+    """The chunk's parts as seed-vmapped jitted functions (argument layouts in the comments);
+    "lstm": `lstm_batches` online LSTM batches and, if any, the goal-latent refresh."""
     enc = goal_encoder(cfg)
     e, t, n_ep = cfg.n_envs, cfg.horizon, cfg.episodes_per_epoch
     n_updates = cfg.epoch_env_steps * cfg.sac.updates_per_step
@@ -331,6 +334,12 @@ def part_functions(cfg, env, frozen):
         s, out = jax.lax.scan(episode, state, jax.random.split(key, n_ep))
         return s.env_state, out
 
+    def lstm_one(fz, state, key):
+        if lstm_batches == 0 or state.lstm is None:
+            return state.buffer.goal_latents.sum()
+        s, _ = online_training.train_lstm(cfg, enc, fz, state, key, lstm_batches)
+        return online_training.refresh_goals(enc, s).buffer.goal_latents.sum()
+
     v = jax.vmap
     return {
         "sim": jax.jit(v(sim_one)),
@@ -341,6 +350,7 @@ def part_functions(cfg, env, frozen):
         "policy": jax.jit(v(policy_one)),
         "sac": jax.jit(v(sac_one)),
         "collect": jax.jit(v(collect_one, in_axes=(None, 0, 0, None))),
+        "lstm": jax.jit(v(lstm_one, in_axes=(None, 0, 0))),
     }
 
 
@@ -402,7 +412,7 @@ def bench_seeds(a, seeds: int, env) -> dict:
           f"{chunk_res['env_steps_per_s_per_seed']:.1f} per seed", flush=True)
 
     # 2. the parts, at one chunk's sizes, on the state the chunks left
-    fns = part_functions(cfg, env, frozen)
+    fns = part_functions(cfg, env, frozen, a.lstm_batches)
     keys = jax.random.split(k_parts, 4 * seeds).reshape(4, seeds, -1)
     parts = {}
     parts["sim"], (_, poses) = _time_part("sim", fns["sim"], (state.env_state, keys[0]), a.reps)
@@ -421,6 +431,7 @@ def bench_seeds(a, seeds: int, env) -> dict:
     parts["policy"], _ = _time_part("policy", fns["policy"],
                                     (state.sac.policy_params, z_steps, goals, keys[3]), a.reps)
     parts["sac"], _ = _time_part("sac", fns["sac"], (state, keys[0]), a.reps)
+    parts["lstm"], _ = _time_part("lstm", fns["lstm"], (frozen, state, keys[3]), a.reps)
     collect = None
     if a.collect:
         collect, _ = _time_part("collect", fns["collect"],
