@@ -545,8 +545,8 @@ def compile_chunk(cfg: TrainConfig, env, n_devices: int = 1, seed_batch: int | N
 # XLA:CPU options for the chunk alone: XLA's older elemental emitters and LLVM at -O1 compile
 # the cpu preset's chunk in 29.6 s instead of 47.6 s on a 2-core Xeon, and it runs faster
 # (4.21 against 4.58 s). Without the YNNPACK fusions (XLA:CPU's default library for dots) its
-# small SAC matmuls run ~20% faster: 1.6 instead of 2.0-2.3 ms per update in the chunk
-# (bench/chunk_options.py, bench/sac_parts.py, docs/training.md).
+# SAC updates run ~20% faster (1.5 instead of 1.9 ms each) and its online LSTM steps slower;
+# the chunk 4% faster in all (bench/chunk_options.py, bench/sac_parts.py, docs/training.md).
 # Other programs keep XLA's defaults (the VAE and U-Net train steps run slower with the
 # emitters and without YNNPACK).
 CHUNK_CPU_COMPILER_OPTIONS = (("xla_cpu_use_fusion_emitters", False),
