@@ -60,14 +60,12 @@ def one(setting: str) -> dict:
 def without(option: str, rounds: int) -> dict:
     """The chunk with all of its options ("all") and without `option`, in this process:
     per program its compile, and per plan its chunk time with SAC on and off."""
+    import importlib.util
     import statistics
 
     import jax
     import jax.numpy as jnp
 
-    import importlib.util
-
-    import envs_mjx
     from roll_jax import compile_cache, loop, sharding
 
     spec = importlib.util.spec_from_file_location("bench_train", os.path.join(HERE, "train.py"))
@@ -78,22 +76,13 @@ def without(option: str, rounds: int) -> dict:
     if option not in dict(full):
         raise SystemExit(f"--without {option}: not one of the chunk's options {sorted(dict(full))}")
     variants = {"all": full, "without": tuple(kv for kv in full if kv[0] != option)}
-    a = argparse.Namespace(task="puck_push", preset="cpu", replay_size=None, chunks=1,
-                           n_envs=None, epoch_env_steps=None)
-    base = bench_train.make_config("puck_push", "roll", "cpu")
-    a.n_envs, a.epoch_env_steps = base.n_envs, base.epoch_env_steps
-    cfg = bench_train.make_cfg(a, 1)
-    env = envs_mjx.make("puck_push")
-    k_fz, k_init = jax.random.split(jax.random.PRNGKey(0))
-    frozen, scene_vae, lstm = bench_train.fresh_frozen_and_pretrained(cfg, k_fz)
-    init = jax.jit(jax.vmap(lambda k: loop.init_state(k, cfg, env, scene_vae, lstm)))
-    plans = [loop.plan_chunk(cfg, e) for e in range(20, 20 + cfg.refresh_every_epochs)]
+    cfg, env, frozen, new_state, plans = bench_train.steady_chunk_inputs("puck_push", "cpu")
     seed_batch = sharding.resolve_seed_batch("auto", 1)
     progs, states, out = {}, {}, {}
     for name, opts in variants.items():
         chunk = jax.jit(sharding.over_seeds(loop.make_chunk(cfg, env, True), 1, 1, seed_batch),
                         donate_argnums=0, compiler_options=compile_cache.accepted_options(opts))
-        st = init(jax.random.split(k_init, 1))
+        st = new_state()
         progs[name], lower_s, compile_s = bench_train._compile(chunk, st, frozen, plans[0])
         (states[name], _), _, _ = bench_train._call(progs[name], st, frozen, plans[0])
         out[name] = {"options": dict(opts), "lower_s": lower_s, "compile_s": compile_s,

@@ -172,6 +172,25 @@ def _sac_share(with_sac: float, without_sac: float, n_updates: int) -> dict:
             "chunk_over_sac": with_sac / sac_s if sac_s > 0 else float("inf")}
 
 
+def steady_chunk_inputs(task: str, preset: str, first_epoch: int = 20, seeds: int = 1,
+                        replay_size: int | None = None):
+    """What the chunk of `train.py --preset PRESET` is timed on: (cfg, env, frozen,
+    new_state, plans). `new_state()` gives the same fresh seeds every call (the chunk donates
+    its state); `plans` are one refresh cycle of steady-state plans from `first_epoch` on."""
+    a = argparse.Namespace(task=task, preset=preset, replay_size=replay_size, chunks=1,
+                           n_envs=None, epoch_env_steps=None)
+    base = make_config(task, "roll", preset)
+    a.n_envs, a.epoch_env_steps = base.n_envs, base.epoch_env_steps
+    cfg = make_cfg(a, seeds)
+    env = envs_mjx.make(task)
+    k_fz, k_init = jax.random.split(jax.random.PRNGKey(0))
+    frozen, scene_vae, lstm = fresh_frozen_and_pretrained(cfg, k_fz)
+    init = jax.jit(jax.vmap(lambda k: loop.init_state(k, cfg, env, scene_vae, lstm)))
+    plans = [loop.plan_chunk(cfg, e)
+             for e in range(first_epoch, first_epoch + cfg.refresh_every_epochs)]
+    return cfg, env, frozen, lambda: init(jax.random.split(k_init, seeds)), plans
+
+
 def sac_share_in_chunk(task: str, preset: str, first_epoch: int = 20, seeds: int = 1,
                        replay_size: int | None = None, rounds: int = 1,
                        yardsticks=None) -> dict:
@@ -185,18 +204,9 @@ def sac_share_in_chunk(task: str, preset: str, first_epoch: int = 20, seeds: int
     `yardsticks`: a function -> {name: ms per update} (e.g. the standalone update), called
     after each pair, so that each pair's in-chunk cost has yardsticks timed beside it on this
     drifting machine; the result then holds every pair's ratios and their medians."""
-    a = argparse.Namespace(task=task, preset=preset, replay_size=replay_size, chunks=1,
-                           n_envs=None, epoch_env_steps=None)
-    base = make_config(task, "roll", preset)
-    a.n_envs, a.epoch_env_steps = base.n_envs, base.epoch_env_steps
-    cfg = make_cfg(a, seeds)
-    env = envs_mjx.make(task)
-    k_fz, k_init = jax.random.split(jax.random.PRNGKey(0))
-    frozen, scene_vae, lstm = fresh_frozen_and_pretrained(cfg, k_fz)
-    state = jax.jit(jax.vmap(lambda k: loop.init_state(k, cfg, env, scene_vae, lstm)))(
-        jax.random.split(k_init, seeds))
-    plans = [loop.plan_chunk(cfg, e)
-             for e in range(first_epoch, first_epoch + cfg.refresh_every_epochs)]
+    cfg, env, frozen, new_state, plans = steady_chunk_inputs(task, preset, first_epoch, seeds,
+                                                             replay_size)
+    state = new_state()
     chunk = loop.compile_chunk(cfg, env, 1, sharding.resolve_seed_batch("auto", seeds))
     compiled, lower_s, compile_s = _compile(chunk, state, frozen, plans[0])
     print(f"  {task} {preset} chunk: trace+lower {lower_s:.1f} s, compile {compile_s:.1f} s",
