@@ -144,6 +144,32 @@ def test_foreground_is_the_lr0_step_and_tracks_cv2():
     assert ((fg_no_shadow == (ref == 255)).reshape(t - fit, -1).mean(1) >= 0.99).all()
 
 
+@pytest.mark.parametrize("kind,history,nmix,plain", [
+    ("shadows", 150, 5, True), ("multimodal", 20, 3, True), ("blobs", 20, 5, False),
+    ("mixed", 150, 5, False)])  # mixed: made non-plain below with tied weights
+def test_foreground_takes_the_short_path_only_where_it_is_exact(kind, history, nmix, plain):
+    # A frozen fitted model's lr-0 step changes nothing, and `foreground` then skips the
+    # update; where it would change something (a tie, a zero weight) the full step runs.
+    # Either way: every frame's mask equals apply(model, frame, 0.0)'s.
+    frames = mp.synthetic_video(kind, t=230, h=32, w=32, c=3, seed=3)
+    model, _ = mog2.apply_video(mog2.init(32, 32, 3, history=history, n_mixtures=nmix),
+                                frames[:150])
+    if kind == "mixed":
+        assert bool(mog2._frozen_is_plain(model))
+        tie = (model.n_modes >= 2)[None] & (jnp.arange(nmix) == 1)[:, None, None]
+        model = model.replace(weights=jnp.where(tie, model.weights[0], model.weights))
+        assert bool(tie.any())
+    assert bool(mog2._frozen_is_plain(model)) == plain
+    fg = np.asarray(mog2.foreground(model, frames[150:]))
+    step = np.stack([np.asarray(mog2.apply(model, f, 0.0)[1]) for f in frames[150:]])
+    np.testing.assert_array_equal(fg, step != 0)
+    np.testing.assert_array_equal(
+        np.asarray(mog2.foreground(model, frames[150:], shadows_as_foreground=False)),
+        step == 255)
+    if kind == "shadows":  # all three outcomes are exercised
+        assert {0, 127, 255} <= set(np.unique(step).tolist())
+
+
 def test_apply_inside_user_jit_with_traced_rate():
     frames = mp.synthetic_video("blobs", t=40, h=16, w=16, c=3, seed=2)
     sub = mp.cv2_subtractor(30, 16.0, True)
