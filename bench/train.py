@@ -173,10 +173,13 @@ def _sac_share(with_sac: float, without_sac: float, n_updates: int) -> dict:
 
 
 def steady_chunk_inputs(task: str, preset: str, first_epoch: int = 20, seeds: int = 1,
-                        replay_size: int | None = None):
+                        replay_size: int | None = None, full_buffer: bool = True):
     """What the chunk of `train.py --preset PRESET` is timed on: (cfg, env, frozen,
     new_state, plans). `new_state()` gives the same fresh seeds every call (the chunk donates
-    its state); `plans` are one refresh cycle of steady-state plans from `first_epoch` on."""
+    its state); `plans` are one refresh cycle of steady-state plans from `first_epoch` on.
+    `full_buffer`: the replay buffer counts as full (its initial contents), as in a run that
+    has collected its capacity, so that the goal-latent refresh covers every stored episode;
+    otherwise it starts empty and the timed chunks fill a few slots."""
     a = argparse.Namespace(task=task, preset=preset, replay_size=replay_size, chunks=1,
                            n_envs=None, epoch_env_steps=None)
     base = make_config(task, "roll", preset)
@@ -185,7 +188,13 @@ def steady_chunk_inputs(task: str, preset: str, first_epoch: int = 20, seeds: in
     env = envs_mjx.make(task)
     k_fz, k_init = jax.random.split(jax.random.PRNGKey(0))
     frozen, scene_vae, lstm = fresh_frozen_and_pretrained(cfg, k_fz)
-    init = jax.jit(jax.vmap(lambda k: loop.init_state(k, cfg, env, scene_vae, lstm)))
+    def init_one(k):
+        st = loop.init_state(k, cfg, env, scene_vae, lstm)
+        if full_buffer:
+            st = st.replace(buffer=st.buffer.replace(size=jnp.int32(st.buffer.capacity)))
+        return st
+
+    init = jax.jit(jax.vmap(init_one))
     plans = [loop.plan_chunk(cfg, e)
              for e in range(first_epoch, first_epoch + cfg.refresh_every_epochs)]
     return cfg, env, frozen, lambda: init(jax.random.split(k_init, seeds)), plans
@@ -193,7 +202,7 @@ def steady_chunk_inputs(task: str, preset: str, first_epoch: int = 20, seeds: in
 
 def sac_share_in_chunk(task: str, preset: str, first_epoch: int = 20, seeds: int = 1,
                        replay_size: int | None = None, rounds: int = 1,
-                       yardsticks=None) -> dict:
+                       yardsticks=None, full_buffer: bool = True) -> dict:
     """The chunk `train.py --preset PRESET` compiles (its schedules; its replay size unless
     `replay_size` is given), timed over `rounds` refresh cycles of steady-state plans (epochs
     `first_epoch` onwards: LSTM rounds, cached-latent refreshes as a run has them), each plan
@@ -205,7 +214,7 @@ def sac_share_in_chunk(task: str, preset: str, first_epoch: int = 20, seeds: int
     after each pair, so that each pair's in-chunk cost has yardsticks timed beside it on this
     drifting machine; the result then holds every pair's ratios and their medians."""
     cfg, env, frozen, new_state, plans = steady_chunk_inputs(task, preset, first_epoch, seeds,
-                                                             replay_size)
+                                                             replay_size, full_buffer)
     state = new_state()
     chunk = loop.compile_chunk(cfg, env, 1, sharding.resolve_seed_batch("auto", seeds))
     compiled, lower_s, compile_s = _compile(chunk, state, frozen, plans[0])
@@ -237,8 +246,8 @@ def sac_share_in_chunk(task: str, preset: str, first_epoch: int = 20, seeds: int
             print(f"  in-chunk / {k}: median {v:.2f} over {len(pairs)} pairs", flush=True)
     res.update(lower_s=lower_s, compile_s=compile_s, first_chunk_s=first,
                sac_hidden=list(cfg.sac.hidden), sac_batch_size=cfg.sac.batch_size,
-               replay_size=cfg.sac.replay_size, sac_schedule=cfg.sac_schedule,
-               epochs_timed=[first_epoch, first_epoch + len(plans) - 1],
+               replay_size=cfg.sac.replay_size, full_buffer=full_buffer,
+               sac_schedule=cfg.sac_schedule, epochs_timed=[first_epoch, first_epoch + len(plans) - 1],
                plans=[{k: v.item() for k, v in vars(pl).items()} for pl in plans])
     print(f"  SAC in the chunk: {res['sac_ms_per_update']:.2f} ms per update; chunk / its SAC "
           f"{res['chunk_over_sac']:.2f}", flush=True)

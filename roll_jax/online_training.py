@@ -70,6 +70,10 @@ def train_lstm(cfg: TrainConfig, enc: GoalEncoder, frozen: Frozen, state, key,
 
 
 REFRESH_CHUNK = 64  # episodes encoded at a time when the buffer's latents are recomputed
+# episodes per block of the goal-latent refresh (latents in, no images): an LSTM step costs
+# about the same at 64 and at 125 sequences on a CPU, so a full 50k buffer's refresh takes
+# 223 ms in blocks of 125 against 413 ms in blocks of 64 (docs/training.md)
+GOAL_REFRESH_CHUNK = 128
 # episodes per block of the buffer's log p(x): 4 x 51 frames x skew_num_latents decodes
 LOG_P_CHUNK = 4
 
@@ -90,5 +94,5 @@ def refresh_goals(enc: GoalEncoder, state):
     no image is encoded: the frame latents change only with `refresh_scene`)."""
     lstm_params = None if state.lstm is None else state.lstm.params
     buf = replay.recompute(state.buffer, "goal_latents", lambda e: enc.sequence(lstm_params, e),
-                           state.buffer.frame_latents, REFRESH_CHUNK)
+                           state.buffer.frame_latents, GOAL_REFRESH_CHUNK)
     return state.replace(buffer=buf)
