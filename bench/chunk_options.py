@@ -19,6 +19,7 @@ Writes bench/results/chunk_compiler_options.json.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import subprocess
@@ -78,23 +79,32 @@ def without(option: str, rounds: int) -> dict:
     variants = {"all": full, "without": tuple(kv for kv in full if kv[0] != option)}
     cfg, env, frozen, new_state, plans = bench_train.steady_chunk_inputs("puck_push", "cpu")
     seed_batch = sharding.resolve_seed_batch("auto", 1)
+    evaluates = functools.partial(bench_train.evaluates, cfg)
     progs, states, out = {}, {}, {}
     for name, opts in variants.items():
-        chunk = jax.jit(sharding.over_seeds(loop.make_chunk(cfg, env, True), 1, 1, seed_batch),
-                        donate_argnums=0, compiler_options=compile_cache.accepted_options(opts))
+        def make(ev, opts=opts):
+            return jax.jit(sharding.over_seeds(loop.make_chunk(cfg, env, ev), 1, 1, seed_batch),
+                           donate_argnums=0,
+                           compiler_options=compile_cache.accepted_options(opts))
+
+        progs[name] = bench_train.chunk_programs(cfg, env, frozen, new_state(), plans, make=make)
         st = new_state()
-        progs[name], lower_s, compile_s = bench_train._compile(chunk, st, frozen, plans[0])
-        (states[name], _), _, _ = bench_train._call(progs[name], st, frozen, plans[0])
-        out[name] = {"options": dict(opts), "lower_s": lower_s, "compile_s": compile_s,
+        for ev, (compiled, _, _) in progs[name].items():  # a warm-up call of each program
+            plan = next(pl for e, pl in plans if evaluates(e) == ev)
+            (st, _), _, _ = bench_train._call(compiled, st, frozen, plan)
+        states[name] = st
+        first = progs[name][evaluates(0)]
+        out[name] = {"options": dict(opts), "lower_s": first[1], "compile_s": first[2],
                      "on_s": [], "off_s": []}
-        print(f"  {name:8s} trace+lower {lower_s:5.1f} s  compile {compile_s:5.1f} s", flush=True)
+        print(f"  {name:8s} trace+lower {first[1]:5.1f} s  compile {first[2]:5.1f} s", flush=True)
     n_updates = cfg.epoch_env_steps * cfg.sac.updates_per_step
-    for i, plan in enumerate(plans * rounds):
+    for i, (epoch, plan) in enumerate(plans * rounds):
         flip = i % 2 == 1
         for name in (reversed(variants) if flip else variants):
+            compiled = progs[name][evaluates(epoch)][0]
             for switch in (("off", "on") if flip else ("on", "off")):
                 pl = plan if switch == "on" else plan.replace(learn=jnp.bool_(False))
-                (states[name], _), wall, _ = bench_train._call(progs[name], states[name],
+                (states[name], _), wall, _ = bench_train._call(compiled, states[name],
                                                                 frozen, pl)
                 out[name][f"{switch}_s"].append(wall)
         print(f"  plan {i}: " + "  ".join(f"{n} {out[n]['on_s'][-1]:.2f} / {out[n]['off_s'][-1]:.2f} s"

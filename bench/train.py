@@ -30,7 +30,9 @@ LSTM); only the env steps per chunk (--epoch-env-steps, --n-envs) and the replay
 (--replay-size; SAC samples gather from it, so its size does not change the speed) are cut for
 the CPU. The frozen segmentation (U-Net; MOG2 fitted on a few random frames) and the
 encoders are freshly initialised with random weights: throughput does not depend on training
-them, so no segmentation fitting or pre-training runs. The chunk plan is the steady state after
+them, so no segmentation fitting or pre-training runs (the MOG2 model so fitted is, like the
+scenes' fitted backgrounds, one whose lr-0 step changes nothing, so `mog2.foreground` takes
+its short path as in a run). The chunk plan is the steady state after
 `learning_starts`: the policy acts and SAC learns; scheduled scene-VAE / LSTM training is off by
 default (--vae-batches / --lstm-batches switch it on; the compiled chunk holds those branches
 either way).
@@ -136,13 +138,15 @@ def _time_part(name: str, fn, args, reps: int, min_time: float = 1.0) -> dict:
 
 # ----------------------------------------------------------------------------- setup
 
-def make_cfg(a, seeds: int):
+def make_cfg(a, seeds: int, eval_every_epochs: int | None = 1):
+    """The benchmark's config: the preset's, learning from the first chunk (the timed plan is
+    the steady state anyway), evaluating every `eval_every_epochs` (None: the preset's)."""
     base = make_config(a.task, "roll", a.preset)
-    # Learning from the first chunk (the timed plan is the steady state anyway).
     sac_cfg = dataclasses.replace(base.sac, learning_starts=0, replay_size=(
         base.sac.replay_size if a.replay_size is None else a.replay_size))
     return make_config(a.task, "roll", a.preset, seeds=seeds, n_envs=a.n_envs,
-                       epoch_env_steps=a.epoch_env_steps, eval_every_epochs=1,
+                       epoch_env_steps=a.epoch_env_steps,
+                       eval_every_epochs=eval_every_epochs or base.eval_every_epochs,
                        total_env_steps=a.epoch_env_steps * a.chunks, sac=sac_cfg)
 
 
@@ -174,17 +178,20 @@ def _sac_share(with_sac: float, without_sac: float, n_updates: int) -> dict:
 
 def steady_chunk_inputs(task: str, preset: str, first_epoch: int = 20, seeds: int = 1,
                         replay_size: int | None = None, full_buffer: bool = True):
-    """What the chunk of `train.py --preset PRESET` is timed on: (cfg, env, frozen,
+    """What the chunks of `train.py --preset PRESET` are timed on: (cfg, env, frozen,
     new_state, plans). `new_state()` gives the same fresh seeds every call (the chunk donates
-    its state); `plans` are one refresh cycle of steady-state plans from `first_epoch` on.
+    its state); `plans` are one refresh cycle of steady-state (epoch, plan) from `first_epoch`
+    on, and `evaluates(epoch)` says which of train.py's two chunks runs it (`chunk_programs`).
     `full_buffer`: the replay buffer counts as full (its initial contents), as in a run that
     has collected its capacity, so that the goal-latent refresh covers every stored episode;
     otherwise it starts empty and the timed chunks fill a few slots."""
-    a = argparse.Namespace(task=task, preset=preset, replay_size=replay_size, chunks=1,
-                           n_envs=None, epoch_env_steps=None)
     base = make_config(task, "roll", preset)
+    # A run as long as the epochs timed (the evaluation schedule must fit in it).
+    a = argparse.Namespace(task=task, preset=preset, replay_size=replay_size,
+                           chunks=first_epoch + base.refresh_every_epochs, n_envs=None,
+                           epoch_env_steps=None)
     a.n_envs, a.epoch_env_steps = base.n_envs, base.epoch_env_steps
-    cfg = make_cfg(a, seeds)
+    cfg = make_cfg(a, seeds, eval_every_epochs=None)
     env = envs_mjx.make(task)
     k_fz, k_init = jax.random.split(jax.random.PRNGKey(0))
     frozen, scene_vae, lstm = fresh_frozen_and_pretrained(cfg, k_fz)
@@ -195,9 +202,30 @@ def steady_chunk_inputs(task: str, preset: str, first_epoch: int = 20, seeds: in
         return st
 
     init = jax.jit(jax.vmap(init_one))
-    plans = [loop.plan_chunk(cfg, e)
+    plans = [(e, loop.plan_chunk(cfg, e))
              for e in range(first_epoch, first_epoch + cfg.refresh_every_epochs)]
     return cfg, env, frozen, lambda: init(jax.random.split(k_init, seeds)), plans
+
+
+def evaluates(cfg, epoch: int) -> bool:
+    """Whether train.py runs `epoch` with the chunk that also evaluates (test envs in the
+    collection batch) or with the one that does not."""
+    return epoch % cfg.eval_every_epochs == 0
+
+
+def chunk_programs(cfg, env, frozen, state, plans, seeds: int = 1, make=None) -> dict:
+    """{evaluate: (compiled chunk, lower_s, compile_s)} for the chunks `plans` use, as
+    train.py builds them (`loop.compile_chunk`; `make(evaluate)` -> a jitted chunk instead),
+    lowered and compiled ahead of time (the state is only read for its shapes)."""
+    out = {}
+    for ev in sorted({evaluates(cfg, e) for e, _ in plans}, reverse=True):
+        fn = (make(ev) if make is not None else
+              loop.compile_chunk(cfg, env, 1, sharding.resolve_seed_batch("auto", seeds),
+                                 evaluate=ev))
+        plan = next(pl for e, pl in plans if evaluates(cfg, e) == ev)
+        compiled, lower_s, compile_s = _compile(fn, state, frozen, plan)
+        out[ev] = (compiled, lower_s, compile_s)
+    return out
 
 
 def sac_share_in_chunk(task: str, preset: str, first_epoch: int = 20, seeds: int = 1,
@@ -215,21 +243,26 @@ def sac_share_in_chunk(task: str, preset: str, first_epoch: int = 20, seeds: int
     drifting machine; the result then holds every pair's ratios and their medians."""
     cfg, env, frozen, new_state, plans = steady_chunk_inputs(task, preset, first_epoch, seeds,
                                                              replay_size, full_buffer)
+    programs = chunk_programs(cfg, env, frozen, new_state(), plans, seeds)
+    for ev, (_, lower_s, compile_s) in programs.items():
+        print(f"  {task} {preset} chunk{' (evaluating)' if ev else ''}: trace+lower "
+              f"{lower_s:.1f} s, compile {compile_s:.1f} s", flush=True)
     state = new_state()
-    chunk = loop.compile_chunk(cfg, env, 1, sharding.resolve_seed_batch("auto", seeds))
-    compiled, lower_s, compile_s = _compile(chunk, state, frozen, plans[0])
-    print(f"  {task} {preset} chunk: trace+lower {lower_s:.1f} s, compile {compile_s:.1f} s",
-          flush=True)
-    (state, _), first, _ = _call(compiled, state, frozen, plans[0])
+    firsts = {}
+    for ev, (compiled, _, _) in programs.items():  # a warm-up call of each program
+        plan = next(pl for e, pl in plans if evaluates(cfg, e) == ev)
+        (state, _), firsts[ev], _ = _call(compiled, state, frozen, plan)
     n_updates = cfg.epoch_env_steps * cfg.sac.updates_per_step
     walls = {"on": [], "off": []}
     pairs = []
-    for i, pl in enumerate(plans * rounds):
+    for i, (epoch, pl) in enumerate(plans * rounds):
+        compiled = programs[evaluates(cfg, epoch)][0]
         for name in (("on", "off") if i % 2 == 0 else ("off", "on")):
             (state, _), w, _ = _call(compiled, state, frozen,
                                      pl if name == "on" else pl.replace(learn=jnp.bool_(False)))
             walls[name].append(w)
-        pair = {"sac_ms_per_update": 1e3 * (walls["on"][-1] - walls["off"][-1]) / n_updates}
+        pair = {"epoch": epoch, "evaluates": evaluates(cfg, epoch),
+                "sac_ms_per_update": 1e3 * (walls["on"][-1] - walls["off"][-1]) / n_updates}
         if yardsticks is not None:
             pair["yardsticks_ms"] = yardsticks()
             pair["over"] = {k: pair["sac_ms_per_update"] / v
@@ -244,11 +277,20 @@ def sac_share_in_chunk(task: str, preset: str, first_epoch: int = 20, seeds: int
                               for k in pairs[0]["over"]}
         for k, v in res["median_over"].items():
             print(f"  in-chunk / {k}: median {v:.2f} over {len(pairs)} pairs", flush=True)
-    res.update(lower_s=lower_s, compile_s=compile_s, first_chunk_s=first,
+    # The first chunk of a run evaluates: its program's trace and compile are the run's.
+    first_ev = evaluates(cfg, 0)
+    res.update(lower_s=programs[first_ev][1], compile_s=programs[first_ev][2],
+               first_chunk_s=firsts[first_ev],
+               other_program={"evaluates": not first_ev, "lower_s": programs[not first_ev][1],
+                              "compile_s": programs[not first_ev][2]}
+               if (not first_ev) in programs else None,
+               eval_every_epochs=cfg.eval_every_epochs,
                sac_hidden=list(cfg.sac.hidden), sac_batch_size=cfg.sac.batch_size,
                replay_size=cfg.sac.replay_size, full_buffer=full_buffer,
-               sac_schedule=cfg.sac_schedule, epochs_timed=[first_epoch, first_epoch + len(plans) - 1],
-               plans=[{k: v.item() for k, v in vars(pl).items()} for pl in plans])
+               sac_schedule=cfg.sac_schedule,
+               epochs_timed=[first_epoch, first_epoch + len(plans) - 1],
+               plans=[{"epoch": e, "evaluates": evaluates(cfg, e),
+                       **{k: v.item() for k, v in vars(pl).items()}} for e, pl in plans])
     print(f"  SAC in the chunk: {res['sac_ms_per_update']:.2f} ms per update; chunk / its SAC "
           f"{res['chunk_over_sac']:.2f}", flush=True)
     return res
