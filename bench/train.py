@@ -4,7 +4,10 @@
    with --seed-batch (auto: 1 on CPU), mapped; state donated: the code path `train.py` runs)
    for each --seeds count, lowered and compiled ahead of time (compile time reported apart),
    then --chunks chunks; the first is a warm-up, the second onwards are timed (steady state).
-   env steps/s = seeds x epoch_env_steps / chunk time.
+   env steps/s = seeds x epoch_env_steps / chunk time. Every chunk timed here evaluates (its
+   test envs step beside the training envs), as train.py's every `eval_every_epochs`-th one
+   does; `sac_share_in_chunk` (bench/roofline.py --chunk) instead times one refresh cycle of
+   plans with train.py's schedule of its two programs, on a full buffer.
 2. Its parts, each its own jitted function over the same seeds and at the sizes one chunk uses,
    timed after a warm-up call:
      sim       episodes x horizon steps of vmap(env.step) (plus env.reset_episode per episode),
