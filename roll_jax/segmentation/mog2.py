@@ -573,9 +573,10 @@ def foreground(model: MOG2Model, frames: Any, shadows_as_foreground: bool = True
     Frame i gets exactly the mask that ``apply(model, frames[i], 0.0)`` would give (frames
     are processed side by side, in chunks of 256; no state is carried between them). For a
     fitted model, whose lr-0 step changes nothing (``_frozen_is_plain``), only the mask's
-    part of the step runs (one chunk's 510 frames: 166 -> 29 ms on a 2-core CPU). OpenCV at ``learningRate=0`` still renormalises the
-    weights and reorders tied modes from frame to frame; that drift is not carried here
-    (use ``apply_video`` with lr 0 for the sequential behaviour). Returns bool[..., H, W];
+    part of the step runs (one chunk's 510 frames: 166 -> 29 ms on a 2-core CPU). OpenCV at
+    ``learningRate=0`` still renormalises the weights and reorders tied modes from frame to
+    frame; that drift is not carried here (use ``apply_video`` with lr 0 for the sequential
+    behaviour). Returns bool[..., H, W];
     ``shadows_as_foreground=False`` drops shadow pixels (mask ``shadow_value``).
     """
     _check_model(model)
