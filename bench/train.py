@@ -198,6 +198,7 @@ def steady_chunk_inputs(task: str, preset: str, first_epoch: int = 20, seeds: in
     env = envs_mjx.make(task)
     k_fz, k_init = jax.random.split(jax.random.PRNGKey(0))
     frozen, scene_vae, lstm = fresh_frozen_and_pretrained(cfg, k_fz)
+
     def init_one(k):
         st = loop.init_state(k, cfg, env, scene_vae, lstm)
         if full_buffer:
@@ -234,10 +235,11 @@ def chunk_programs(cfg, env, frozen, state, plans, seeds: int = 1, make=None) ->
 def sac_share_in_chunk(task: str, preset: str, first_epoch: int = 20, seeds: int = 1,
                        replay_size: int | None = None, rounds: int = 1,
                        yardsticks=None, full_buffer: bool = True) -> dict:
-    """The chunk `train.py --preset PRESET` compiles (its schedules; its replay size unless
+    """The chunks `train.py --preset PRESET` compiles (its schedules; its replay size unless
     `replay_size` is given), timed over `rounds` refresh cycles of steady-state plans (epochs
-    `first_epoch` onwards: LSTM rounds, cached-latent refreshes as a run has them), each plan
-    run with its SAC on and off back to back (the order flipped every other pair): the
+    `first_epoch` onwards: LSTM rounds, cached-latent refreshes and evaluations as a run has
+    them, each plan on the program train.py gives it), each plan run with its SAC on and off
+    back to back (the order flipped every other pair): the
     difference is the cost of the SAC updates inside the chunk (HER sampling, prior goals,
     gathers included).
 
