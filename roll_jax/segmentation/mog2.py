@@ -181,6 +181,35 @@ def _dot(a: list, b: list, zero: jax.Array) -> jax.Array:
     return s
 
 
+def _reciprocal(total: jax.Array) -> jax.Array:
+    """OpenCV's renormalising factor: 1 / total, or 0 where |total| <= FLT_EPSILON."""
+    return jnp.where(jnp.abs(total) > _FLT_EPSILON, np.float32(1) / total, np.float32(0))
+
+
+def _slot_match(model: MOG2Model, x: list, mu_k: list, var_k: jax.Array, check: jax.Array,
+                weight_before: jax.Array, zero: jax.Array):
+    """One slot's test of the pixels still to match (`check`): (squared distance, background
+    (within var_threshold while the slots before it weigh under background_ratio), fit (within
+    var_threshold_gen)). x, mu_k: lists over channels."""
+    d = [m - xc for m, xc in zip(mu_k, x)]
+    dist2 = _dot(d, d, zero)
+    background = check & (weight_before < np.float32(model.background_ratio)) & (
+        dist2 < np.float32(model.var_threshold) * var_k)
+    return d, dist2, background, check & (dist2 < np.float32(model.var_threshold_gen) * var_k)
+
+
+def _mask(model: MOG2Model, background: jax.Array, x: list, w: list, var: list, mu: list,
+          nm: jax.Array, zero: jax.Array) -> jax.Array:
+    """uint8 mask of pixel rows: 0 background, else shadow_value for a shadow (tested on the
+    model w, var, mu: lists over slots), else 255."""
+    if model.detect_shadows:
+        shadow = _shadow(model, x, w, var, mu, nm, zero)
+        fg = jnp.where(shadow, np.uint8(model.shadow_value), np.uint8(255))
+    else:
+        fg = jnp.full(background.shape, 255, jnp.uint8)
+    return jnp.where(background, np.uint8(0), fg)
+
+
 def _shadow(model: MOG2Model, x: list, w: list, var: list, mu: list, nm: jax.Array,
             zero: jax.Array) -> jax.Array:
     """OpenCV's detectShadowGMM on every pixel (x, mu: lists over channels of [H, W])."""
@@ -216,8 +245,6 @@ def _apply_impl(model: MOG2Model, frame: jax.Array, rate: dict) -> tuple[MOG2Mod
     h, w_img = model.n_modes.shape[-2:]
     lead = model.n_frames.shape
     px = lead + (h * w_img,)  # row shape: pixels last, contiguous
-    tb, big_tb = np.float32(model.var_threshold), np.float32(model.background_ratio)
-    tg = np.float32(model.var_threshold_gen)
     var_min = np.float32(min(model.var_min, model.var_max))
     var_max = np.float32(max(model.var_min, model.var_max))
 
@@ -269,11 +296,8 @@ def _apply_impl(model: MOG2Model, frame: jax.Array, rate: dict) -> tuple[MOG2Mod
         muk = [chan(muk, c) for c in range(n_ch)]
         active = k < nm
         weight = rnd(alpha1 * wk) + prune
-        d = [muk[c] - x[c] for c in range(n_ch)]
-        dist2 = _dot(d, d, zero)
-        check = active & ~fitted
-        background = background | (check & (total_w < big_tb) & (dist2 < tb * vk))
-        fit = check & (dist2 < tg * vk)
+        d, dist2, bg_k, fit = _slot_match(model, x, muk, vk, active & ~fitted, total_w, zero)
+        background = background | bg_k
         weight = jnp.where(fit, weight + alpha_t, weight)
         kk = alpha_t / weight
         # Only the matched slot's mean and variance change: keep them aside, write after.
@@ -304,7 +328,7 @@ def _apply_impl(model: MOG2Model, frame: jax.Array, rate: dict) -> tuple[MOG2Mod
     mu = jnp.where(jnp.expand_dims(upd, nl + 1), expand(jnp.stack(fit_mu, nl)), mu0)
 
     # 2. Renormalise the slots still in use by the float32 reciprocal (multiply, not divide).
-    inv = jnp.where(jnp.abs(total_w) > _FLT_EPSILON, np.float32(1) / total_w, np.float32(0))
+    inv = _reciprocal(total_w)
     w = jnp.where(slots < expand(nm), w * expand(inv), w)
 
     # 3. No match: a new mode in slot nm, or replace the weakest (slot M-1) when full.
@@ -336,15 +360,10 @@ def _apply_impl(model: MOG2Model, frame: jax.Array, rate: dict) -> tuple[MOG2Mod
         mu_p = jnp.where(jnp.expand_dims(take, nl + 1), expand(at(mu, i)), mu_p)
 
     # 5. Mask: background, else shadow (tested on the updated model), else foreground.
-    if model.detect_shadows:
-        shadow = _shadow(model, x, [at(w_p, t) for t in range(m_slots)],
-                         [at(var_p, t) for t in range(m_slots)],
-                         [[chan(at(mu_p, t), c) for c in range(n_ch)] for t in range(m_slots)],
-                         nm, zero)
-        fg = jnp.where(shadow, np.uint8(model.shadow_value), np.uint8(255))
-    else:
-        fg = jnp.full(px, 255, jnp.uint8)
-    mask = jnp.where(background, np.uint8(0), fg).reshape(lead + (h, w_img))
+    mask = _mask(model, background, x, [at(w_p, t) for t in range(m_slots)],
+                 [at(var_p, t) for t in range(m_slots)],
+                 [[chan(at(mu_p, t), c) for c in range(n_ch)] for t in range(m_slots)],
+                 nm, zero).reshape(lead + (h, w_img))
 
     new = model.replace(
         weights=w_p.reshape(model.weights.shape), variances=var_p.reshape(model.weights.shape),
@@ -464,7 +483,7 @@ def _background_jit(model: MOG2Model) -> jax.Array:
                for c, a in enumerate(acc)]
         total = jnp.where(act, total + wk, total)
         done = done | (act & (total > big_tb))  # the crossing slot is included
-    inv = jnp.where(jnp.abs(total) > _FLT_EPSILON, np.float32(1) / total, np.float32(0))
+    inv = _reciprocal(total)
     # saturate_cast<uchar>(float): round half to even, then clamp.
     img = [jnp.clip(jnp.round(a * inv), 0, 255).astype(jnp.uint8) for a in acc]
     return jnp.stack(img, -1)
@@ -502,8 +521,6 @@ def _frozen_masks(model: MOG2Model, frames: jax.Array) -> jax.Array:
     m_slots, n_ch = model.n_mixtures, model.means.shape[-3]
     h, w_img = model.n_modes.shape
     n = frames.shape[0]
-    big_tb = np.float32(model.background_ratio)
-    tb, tg = np.float32(model.var_threshold), np.float32(model.var_threshold_gen)
     zero = jnp.minimum(model.n_frames, 0)
     w = model.weights.reshape(m_slots, -1)
     var = model.variances.reshape(m_slots, -1)
@@ -515,26 +532,18 @@ def _frozen_masks(model: MOG2Model, frames: jax.Array) -> jax.Array:
     for k in range(m_slots):
         before.append(total)
         total = jnp.where(active[k], total + w[k], total)
-    inv = jnp.where(jnp.abs(total) > _FLT_EPSILON, np.float32(1) / total, np.float32(0))
-    w_n = jnp.where(jnp.arange(m_slots)[:, None] < nm, w * inv, w)
+    w_n = jnp.where(jnp.arange(m_slots)[:, None] < nm, w * _reciprocal(total), w)
 
     x = jnp.moveaxis(frames.reshape(n, h * w_img, n_ch), -1, 0).astype(jnp.float32)
     x = [x[c] for c in range(n_ch)]  # [N, P] each
     fitted = jnp.zeros((n, h * w_img), bool)
     background = fitted
+    mu = [[mu[k, c] for c in range(n_ch)] for k in range(m_slots)]
     for k in range(m_slots):
-        d = [mu[k, c] - x[c] for c in range(n_ch)]
-        dist2 = _dot(d, d, zero)
-        check = active[k] & ~fitted
-        background = background | (check & (before[k] < big_tb) & (dist2 < tb * var[k]))
-        fitted = fitted | (check & (dist2 < tg * var[k]))
-    if model.detect_shadows:
-        shadow = _shadow(model, x, list(w_n), list(var),
-                         [[mu[t, c] for c in range(n_ch)] for t in range(m_slots)], nm, zero)
-        fg = jnp.where(shadow, np.uint8(model.shadow_value), np.uint8(255))
-    else:
-        fg = jnp.full(fitted.shape, 255, jnp.uint8)
-    return jnp.where(background, np.uint8(0), fg).reshape(n, h, w_img)
+        _, _, bg_k, fit = _slot_match(model, x, mu[k], var[k], active[k] & ~fitted, before[k],
+                                      zero)
+        background, fitted = background | bg_k, fitted | fit
+    return _mask(model, background, x, list(w_n), list(var), mu, nm, zero).reshape(n, h, w_img)
 
 
 @functools.partial(jax.jit, static_argnames="shadows_as_foreground")
