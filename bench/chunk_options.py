@@ -88,11 +88,7 @@ def without(option: str, rounds: int) -> dict:
                            compiler_options=compile_cache.accepted_options(opts))
 
         progs[name] = bench_train.chunk_programs(cfg, env, frozen, new_state(), plans, make=make)
-        st = new_state()
-        for ev, (compiled, _, _) in progs[name].items():  # a warm-up call of each program
-            plan = next(pl for e, pl in plans if evaluates(e) == ev)
-            (st, _), _, _ = bench_train._call(compiled, st, frozen, plan)
-        states[name] = st
+        states[name], _ = bench_train.warm_up(cfg, progs[name], new_state(), frozen, plans)
         first = progs[name][evaluates(0)]
         out[name] = {"options": dict(opts), "lower_s": first[1], "compile_s": first[2],
                      "on_s": [], "off_s": []}

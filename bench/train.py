@@ -217,6 +217,11 @@ def evaluates(cfg, epoch: int) -> bool:
     return epoch % cfg.eval_every_epochs == 0
 
 
+def _plan_of(cfg, plans, ev: bool):
+    """The first of `plans` that the chunk with evaluate == `ev` runs."""
+    return next(pl for e, pl in plans if evaluates(cfg, e) == ev)
+
+
 def chunk_programs(cfg, env, frozen, state, plans, seeds: int = 1, make=None) -> dict:
     """{evaluate: (compiled chunk, lower_s, compile_s)} for the chunks `plans` use, as
     train.py builds them (`loop.compile_chunk`; `make(evaluate)` -> a jitted chunk instead),
@@ -226,10 +231,17 @@ def chunk_programs(cfg, env, frozen, state, plans, seeds: int = 1, make=None) ->
         fn = (make(ev) if make is not None else
               loop.compile_chunk(cfg, env, 1, sharding.resolve_seed_batch("auto", seeds),
                                  evaluate=ev))
-        plan = next(pl for e, pl in plans if evaluates(cfg, e) == ev)
-        compiled, lower_s, compile_s = _compile(fn, state, frozen, plan)
-        out[ev] = (compiled, lower_s, compile_s)
+        out[ev] = _compile(fn, state, frozen, _plan_of(cfg, plans, ev))
     return out
+
+
+def warm_up(cfg, programs: dict, state, frozen, plans):
+    """One call of each of `chunk_programs`' programs, the state passed on: (state,
+    {evaluate: wall seconds of its first call})."""
+    firsts = {}
+    for ev, (compiled, _, _) in programs.items():
+        (state, _), firsts[ev], _ = _call(compiled, state, frozen, _plan_of(cfg, plans, ev))
+    return state, firsts
 
 
 def sac_share_in_chunk(task: str, preset: str, first_epoch: int = 20, seeds: int = 1,
@@ -252,11 +264,7 @@ def sac_share_in_chunk(task: str, preset: str, first_epoch: int = 20, seeds: int
     for ev, (_, lower_s, compile_s) in programs.items():
         print(f"  {task} {preset} chunk{' (evaluating)' if ev else ''}: trace+lower "
               f"{lower_s:.1f} s, compile {compile_s:.1f} s", flush=True)
-    state = new_state()
-    firsts = {}
-    for ev, (compiled, _, _) in programs.items():  # a warm-up call of each program
-        plan = next(pl for e, pl in plans if evaluates(cfg, e) == ev)
-        (state, _), firsts[ev], _ = _call(compiled, state, frozen, plan)
+    state, firsts = warm_up(cfg, programs, new_state(), frozen, plans)
     n_updates = cfg.epoch_env_steps * cfg.sac.updates_per_step
     walls = {"on": [], "off": []}
     pairs = []
