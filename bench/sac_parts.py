@@ -11,14 +11,24 @@ under a `lax.cond` inside each step of a scan over env steps, with a 512 x 512 m
 step standing in for the env's work (timed with the cond on minus off, as bench/train.py
 times the chunk). Every variant is compiled twice, with XLA's defaults and
 with the chunk's own compiler options (`loop.chunk_compiler_options`), and timed both ways.
+The last row is no scan: `--steps` calls of a jitted `sac.sac_update`, one per update, each on
+a batch of its own (best of 3 such loops).
+
+In a scan on one constant batch with its metrics dropped (the roofline's FLOP-rate
+yardstick), XLA deletes the metrics' work and hoists what depends on the batch alone out of
+the loop: its loop body holds 184 fusions against 251 for the update on a new batch with its
+metrics, which is the update the chunk runs (docs/training.md).
 
     python bench/sac_parts.py [--steps 300] [--out bench/results/sac_parts.json]
 """
 from __future__ import annotations
 
 import argparse
+import collections
 import os
+import re
 import sys
+import time
 from typing import Any, Callable, NamedTuple
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -43,11 +53,11 @@ class Variant(NamedTuple):
     off_args: Any = None
 
 
-def variants(steps: int) -> dict[str, Variant]:
-    """name -> Variant; each runs `steps` updates (the interleaved one: rounded up to whole
-    env steps)."""
+def _setup():
+    """(cfg, SAC state, filled buffer, prior-goal bank, one HER batch) at the cpu preset's
+    sizes."""
     cfg = make_config("puck_push", "roll", "cpu")
-    scfg, enc = cfg.sac, goal_encoder(cfg)
+    scfg = cfg.sac
     b, n, t, d = scfg.batch_size, 1000, cfg.horizon, 6
     ks = jax.random.split(jax.random.PRNGKey(0), 8)
     state = sac.init_sac(ks[7], d, d, 2, scfg)
@@ -59,6 +69,15 @@ def variants(steps: int) -> dict[str, Variant]:
                       size=jnp.int32(n))
     bank = jax.random.normal(ks[4], (loop.PRIOR_BANK, d))
     fixed = replay.sample_transitions(buf, ks[5], b, bank[:b], scfg.goal_fracs, cfg.reward_norm)
+    return cfg, state, buf, bank, fixed
+
+
+def variants(steps: int) -> dict[str, Variant]:
+    """name -> Variant; each runs `steps` updates (the interleaved one: rounded up to whole
+    env steps)."""
+    cfg, state, buf, bank, fixed = _setup()
+    scfg, enc = cfg.sac, goal_encoder(cfg)
+    b = scfg.batch_size
 
     def constant_batch(s, k):
         return jax.lax.scan(lambda s, k: (sac.sac_update(s, k, fixed, scfg)[0], None), s,
@@ -89,7 +108,7 @@ def variants(steps: int) -> dict[str, Variant]:
 
     per_step = cfg.n_envs * scfg.updates_per_step
     env_steps = -(-steps // per_step)  # whole env steps of per_step updates each
-    work = jax.random.normal(ks[6], (512, 512))
+    work = jax.random.normal(jax.random.PRNGKey(6), (512, 512))
 
     def interleaved(s, k, learn):
         zeros = jax.tree.map(jnp.zeros_like, jax.eval_shape(
@@ -118,6 +137,62 @@ def variants(steps: int) -> dict[str, Variant]:
     }
 
 
+PER_CALL = "update per call of a jitted sac_update, new batch each"
+
+
+def per_call_timer(steps: int, compiler_options=None) -> Callable[[], float]:
+    """A function -> best ms per update of `steps` updates, each one call of a jitted
+    `sac.sac_update` (state donated) on a batch of its own: the update as a standalone
+    function, which no loop lets XLA fold into its neighbours (Python's dispatch included)."""
+    import numpy as np
+
+    cfg, state, _, _, fixed = _setup()
+    scfg = cfg.sac
+    one = jax.jit(lambda s, k, x: sac.sac_update(s, k, x, scfg), donate_argnums=0,
+                  compiler_options=compiler_options)
+    noise = np.random.default_rng(0).standard_normal(steps).astype(np.float32)
+    batches = [jax.tree.map(lambda x, e=e: x + jnp.asarray(0.0 * e, x.dtype), fixed)
+               for e in noise]
+    keys = list(jax.random.split(jax.random.PRNGKey(1), steps))
+
+    def loop_once() -> float:
+        s = jax.block_until_ready(jax.tree.map(jnp.copy, state))
+        t0 = time.perf_counter()
+        for k, x in zip(keys, batches):
+            s, _ = one(s, k, x)
+        jax.block_until_ready(s)
+        return time.perf_counter() - t0
+
+    loop_once()  # compile and warm up
+
+    def timer() -> float:
+        return 1e3 * min(loop_once() for _ in range(3)) / steps
+    return timer
+
+
+_SKIPPED_OPS = ("parameter", "get-tuple-element", "tuple", "constant", "bitcast")
+
+
+def loop_body_ops(hlo_text: str) -> dict[str, int]:
+    """Op counts of the largest while-loop body in an optimised HLO module's text (the update
+    loop of these variants): how much work one update leaves inside its loop."""
+    bodies, cur = {}, None
+    for line in hlo_text.split("\n"):
+        head = re.match(r"^(?:ENTRY )?%?([\w.\-]+) .*\{$", line)
+        if head:
+            cur = head.group(1)
+            bodies[cur] = collections.Counter()
+        elif cur is not None and line.startswith("  "):
+            op = re.search(r"=\s*\S+\s+([\w\-]+)\(", line)
+            if op and op.group(1) not in _SKIPPED_OPS:
+                bodies[cur][op.group(1)] += 1
+    names = set(re.findall(r"\bwhile\(.*?body=%?([\w.\-]+)", hlo_text))
+    if not names:
+        return {}
+    largest = max(names, key=lambda n: sum(bodies.get(n, {}).values()))
+    return dict(bodies[largest].most_common())
+
+
 def ms_per_update(v: Variant, compiler_options=None) -> float:
     """Best-call ms per update of variant `v` (minus its updates-off time, if it has one)."""
     f = jax.jit(v.fn, compiler_options=compiler_options)
@@ -143,9 +218,18 @@ def main(argv=None):
             if label == "chunk_options" and opts is None:
                 continue  # not a CPU backend, or this jaxlib refuses them
             row[f"ms_per_update_{label}"] = round(ms_per_update(v, opts), 4)
+        ops = loop_body_ops(jax.jit(v.fn).lower(*v.args).compile().as_text())
+        row["loop_body_ops_xla_defaults"] = {k: ops.get(k, 0) for k in ("fusion", "dot", "copy")}
         rows.append(row)
-        print(f"{name:50s} " + "  ".join(f"{k[14:]} {v:6.3f} ms" for k, v in row.items()
-                                         if k != "name"), flush=True)
+    row = {"name": PER_CALL}
+    for label, opts in (("xla_defaults", None), ("chunk_options", options)):
+        if label != "chunk_options" or opts is not None:
+            row[f"ms_per_update_{label}"] = round(per_call_timer(a.steps, opts)(), 4)
+    rows.append(row)
+    for row in rows:
+        print(f"{row['name']:50s} " + "  ".join(f"{k[14:]} {v:6.3f} ms" for k, v in row.items()
+                                                if k.startswith("ms_")),
+              row.get("loop_body_ops_xla_defaults", ""), flush=True)
     write_results(a.out, {"steps": a.steps, "jax_version": jax.__version__,
                           "cpu_count": os.cpu_count(), "cpu_model": cpu_model(),
                           "chunk_compiler_options": options, "rows": rows})
