@@ -108,7 +108,8 @@ def variants(steps: int) -> dict[str, Variant]:
 
     per_step = cfg.n_envs * scfg.updates_per_step
     env_steps = -(-steps // per_step)  # whole env steps of per_step updates each
-    work = jax.random.normal(jax.random.split(jax.random.PRNGKey(0), 8)[6], (512, 512))  # _setup's ks[6]
+    k_work = jax.random.split(jax.random.PRNGKey(0), 8)[6]  # _setup's keys, as before
+    work = jax.random.normal(k_work, (512, 512))
 
     def interleaved(s, k, learn):
         zeros = jax.tree.map(jnp.zeros_like, jax.eval_shape(
