@@ -54,8 +54,8 @@ class Variant(NamedTuple):
 
 
 def _setup():
-    """(cfg, SAC state, filled buffer, prior-goal bank, one HER batch) at the cpu preset's
-    sizes."""
+    """(cfg, SAC state, filled buffer, prior-goal bank, one HER batch, a 512 x 512 matrix for
+    the interleaved variant's stand-in env work) at the cpu preset's sizes."""
     cfg = make_config("puck_push", "roll", "cpu")
     scfg = cfg.sac
     b, n, t, d = scfg.batch_size, 1000, cfg.horizon, 6
@@ -69,13 +69,13 @@ def _setup():
                       size=jnp.int32(n))
     bank = jax.random.normal(ks[4], (loop.PRIOR_BANK, d))
     fixed = replay.sample_transitions(buf, ks[5], b, bank[:b], scfg.goal_fracs, cfg.reward_norm)
-    return cfg, state, buf, bank, fixed
+    return cfg, state, buf, bank, fixed, jax.random.normal(ks[6], (512, 512))
 
 
 def variants(steps: int) -> dict[str, Variant]:
     """name -> Variant; each runs `steps` updates (the interleaved one: rounded up to whole
     env steps)."""
-    cfg, state, buf, bank, fixed = _setup()
+    cfg, state, buf, bank, fixed, work = _setup()
     scfg, enc = cfg.sac, goal_encoder(cfg)
     b = scfg.batch_size
 
@@ -108,8 +108,6 @@ def variants(steps: int) -> dict[str, Variant]:
 
     per_step = cfg.n_envs * scfg.updates_per_step
     env_steps = -(-steps // per_step)  # whole env steps of per_step updates each
-    k_work = jax.random.split(jax.random.PRNGKey(0), 8)[6]  # _setup's keys, as before
-    work = jax.random.normal(k_work, (512, 512))
 
     def interleaved(s, k, learn):
         zeros = jax.tree.map(jnp.zeros_like, jax.eval_shape(
@@ -145,15 +143,11 @@ def per_call_timer(steps: int, compiler_options=None) -> Callable[[], float]:
     """A function -> best ms per update of `steps` updates, each one call of a jitted
     `sac.sac_update` (state donated) on a batch of its own: the update as a standalone
     function, which no loop lets XLA fold into its neighbours (Python's dispatch included)."""
-    import numpy as np
-
-    cfg, state, _, _, fixed = _setup()
+    cfg, state, _, _, fixed, _ = _setup()
     scfg = cfg.sac
     one = jax.jit(lambda s, k, x: sac.sac_update(s, k, x, scfg), donate_argnums=0,
                   compiler_options=compiler_options)
-    noise = np.random.default_rng(0).standard_normal(steps).astype(np.float32)
-    batches = [jax.tree.map(lambda x, e=e: x + jnp.asarray(0.0 * e, x.dtype), fixed)
-               for e in noise]
+    batches = [jax.tree.map(jnp.copy, fixed) for _ in range(steps)]  # same values, own buffers
     keys = list(jax.random.split(jax.random.PRNGKey(1), steps))
 
     def loop_once() -> float:
@@ -194,9 +188,9 @@ def loop_body_ops(hlo_text: str) -> dict[str, int]:
     return dict(bodies[largest].most_common())
 
 
-def ms_per_update(v: Variant, compiler_options=None) -> float:
-    """Best-call ms per update of variant `v` (minus its updates-off time, if it has one)."""
-    f = jax.jit(v.fn, compiler_options=compiler_options)
+def ms_per_update(v: Variant, f) -> float:
+    """Best-call ms per update of variant `v` run by `f` (`v.fn` jitted or compiled), minus
+    its updates-off time if it has one."""
     seconds = time_best(f, *v.args)[1]
     if v.off_args is not None:
         seconds -= time_best(f, *v.off_args)[1]
@@ -218,9 +212,12 @@ def main(argv=None):
         for label, opts in (("xla_defaults", None), ("chunk_options", options)):
             if label == "chunk_options" and opts is None:
                 continue  # not a CPU backend, or this jaxlib refuses them
-            row[f"ms_per_update_{label}"] = round(ms_per_update(v, opts), 4)
-        ops = loop_body_ops(jax.jit(v.fn).lower(*v.args).compile().as_text())
-        row["loop_body_ops_xla_defaults"] = {k: ops.get(k, 0) for k in ("fusion", "dot", "copy")}
+            compiled = jax.jit(v.fn, compiler_options=opts).lower(*v.args).compile()
+            row[f"ms_per_update_{label}"] = round(ms_per_update(v, compiled), 4)
+            if label == "xla_defaults":
+                ops = loop_body_ops(compiled.as_text())
+                row["loop_body_ops_xla_defaults"] = {k: ops.get(k, 0)
+                                                     for k in ("fusion", "dot", "copy")}
         rows.append(row)
     row = {"name": PER_CALL}
     for label, opts in (("xla_defaults", None), ("chunk_options", options)):
