@@ -49,6 +49,10 @@ from roll_jax.models import lstm_encode
 PAPER_ERROR_CM = {"lstm_matching": 1.0, "lstm": 2.2, "vae": 3.1}
 OCCLUSION_MODELS = ("lstm_matching", "lstm", "vae")
 OCCLUSION_DROP = 0.85  # Appendix A: "removing 85% of the pixels"
+# LSTM training steps at which the occlusion command also scores the three models (below
+# the run's own length, which is scored too): the auto-encoder LSTM's retrieval changes with
+# how far it has learned to copy its input (docs/analysis.md).
+CURVE_STEPS = (0, 100, 200, 500, 1000, 2000, 5000)
 
 
 # ============================================================================ statistics
@@ -444,29 +448,25 @@ def retrieval_errors(clean_codes, query_codes, positions, occ_t) -> tuple[np.nda
     return err, nn
 
 
-def occlusion_retrieval(key, images, masks, positions, frame_encoder: Callable,
-                        heads: dict[str, Callable], drop: float = OCCLUSION_DROP,
-                        min_t: int = 1, scale: float = 100.0) -> dict:
-    """Appendix A. images: segmented uint8 [B, T, 48, 48, 3] (clean trajectories); masks
-    their object masks [B, T, 48, 48] (or None); positions the true puck xy [B, T, 2] (m).
-
-    frame_encoder: images [N, 48, 48, 3] -> per-frame latents [N, d] (the object-VAE mean);
-    heads: name -> f(latents [B, T, d]) -> codes [B, T, d'] (an LSTM over each trajectory, or
-    the identity for the VAE alone). For each trajectory one frame t >= min_t is occluded
-    (`drop` of its object pixels removed); its code is the head's output at t on the
-    trajectory with frame t replaced; the nearest clean code among all B*T frames is
-    retrieved. Returns {"error_cm": {name: [mean, std]}, "median_cm": {name: median},
-    "errors_cm": {name: [B]}, "occ_t",
-    "retrieved", "n_queries", "pool_size", "chance_cm"} (errors in positions' units times
-    `scale`; chance_cm: the mean error of a uniformly random pick from the pool)."""
+def occlusion_queries(key, images, masks, frame_encoder: Callable,
+                      drop: float = OCCLUSION_DROP, min_t: int = 1):
+    """The queries of `occlusion_retrieval`: (per-frame latents of the clean trajectories
+    [B, T, d], the same with frame occ_t[b] replaced by its occluded latent, occ_t [B])."""
     images = np.asarray(images)
     b, t_len = images.shape[:2]
     occ_t, occluded = occlude_frames(key, images, masks, drop, min_t)
     lat = np.asarray(frame_encoder(images.reshape((-1,) + images.shape[2:])))
     lat = lat.reshape(b, t_len, -1)
-    occ_lat = np.asarray(frame_encoder(occluded))
     occ_seq = lat.copy()
-    occ_seq[np.arange(b), occ_t] = occ_lat
+    occ_seq[np.arange(b), occ_t] = np.asarray(frame_encoder(occluded))
+    return lat, occ_seq, occ_t
+
+
+def score_heads(lat, occ_seq, occ_t, positions, heads: dict[str, Callable],
+                scale: float = 100.0) -> dict:
+    """Retrieval error of each head on the queries of `occlusion_queries` (keys as
+    `occlusion_retrieval`'s)."""
+    b, t_len = lat.shape[:2]
     pos = np.asarray(positions, np.float64)
     truth = pos[np.arange(b), occ_t]
     chance = np.linalg.norm(pos.reshape(1, b * t_len, -1) - truth[:, None], axis=-1).mean()
@@ -482,6 +482,39 @@ def occlusion_retrieval(key, images, masks, positions, frame_encoder: Callable,
         out["error_cm"][name] = [float(err.mean()), float(err.std())]
         out["median_cm"][name] = float(np.median(err))
     return out
+
+
+def occlusion_retrieval(key, images, masks, positions, frame_encoder: Callable,
+                        heads: dict[str, Callable], drop: float = OCCLUSION_DROP,
+                        min_t: int = 1, scale: float = 100.0) -> dict:
+    """Appendix A. images: segmented uint8 [B, T, 48, 48, 3] (clean trajectories); masks
+    their object masks [B, T, 48, 48] (or None); positions the true puck xy [B, T, 2] (m).
+
+    frame_encoder: images [N, 48, 48, 3] -> per-frame latents [N, d] (the object-VAE mean);
+    heads: name -> f(latents [B, T, d]) -> codes [B, T, d'] (an LSTM over each trajectory, or
+    the identity for the VAE alone). For each trajectory one frame t >= min_t is occluded
+    (`drop` of its object pixels removed); its code is the head's output at t on the
+    trajectory with frame t replaced; the nearest clean code among all B*T frames is
+    retrieved. Returns {"error_cm": {name: [mean, std]}, "median_cm": {name: median},
+    "errors_cm": {name: [B]}, "occ_t",
+    "retrieved", "n_queries", "pool_size", "chance_cm"} (errors in positions' units times
+    `scale`; chance_cm: the mean error of a uniformly random pick from the pool)."""
+    lat, occ_seq, occ_t = occlusion_queries(key, images, masks, frame_encoder, drop, min_t)
+    return score_heads(lat, occ_seq, occ_t, positions, heads, scale)
+
+
+def paired_difference(a, b) -> list[float]:
+    """[mean, standard error] of a - b over paired per-query errors."""
+    d = np.asarray(a, np.float64) - np.asarray(b, np.float64)
+    return [float(d.mean()), float(d.std(ddof=1) / np.sqrt(d.size)) if d.size > 1 else 0.0]
+
+
+def ordering_holds(res: dict) -> bool:
+    """The paper's ordering LSTM + matching < LSTM < object-VAE by mean error, each step
+    separated by more than two standard errors of the paired difference."""
+    e = res["errors_cm"]
+    return all(d[0] + 2.0 * d[1] < 0.0 for d in (paired_difference(e["lstm_matching"], e["lstm"]),
+                                                 paired_difference(e["lstm"], e["vae"])))
 
 
 # --- the three models --------------------------------------------------------------------
@@ -523,28 +556,39 @@ def _train_lstm(state, key, vae_params, latents, images, masks, vae_cfg, lstm_cf
 
 
 def train_occlusion_lstms(key, vae_params, vae_cfg, lstm_cfg, images, masks, n_steps: int,
-                          batch: int = 25, chunk: int = 100):
+                          batch: int = 25, chunk: int = 100, snapshot_steps=()):
     """Two LSTMs from the same initialisation on the same batches of the same trajectories
     (segmented uint8 [B, T, 48, 48, 3], masks [B, T, 48, 48]) over the same object-VAE: one
     with auto-encoder + matching loss (synthetic occlusion from `make_occlusion`, drop
     lstm_cfg.occlusion_drop), one with the auto-encoder loss only.
 
-    Returns ({"lstm_matching": params, "lstm": params}, {name: losses [n_steps]})."""
+    Returns ({"lstm_matching": params, "lstm": params}, {name: losses [n_steps]},
+    {step: {name: params}} after each of `snapshot_steps` (0 = the initialisation))."""
+    bad = [s for s in snapshot_steps if not 0 <= s <= n_steps]
+    if bad:
+        raise ValueError(f"snapshot_steps {bad} outside 0..n_steps={n_steps}")
     images, masks = jnp.asarray(images), jnp.asarray(masks)
     latents = encode_frames(vae_params, vae_cfg, images)
     k_init, k_train = jax.random.split(key)
     init = encoders.init_lstm(k_init, lstm_cfg, latents.shape[-1])
+    # Segments of `chunk` steps, also cut at the snapshots; a segment's batches come from its
+    # first step's key, so snapshots at multiples of `chunk` leave the training unchanged.
+    starts = sorted(set(range(0, n_steps, chunk)) | {s for s in snapshot_steps if s < n_steps})
     params, hist = {}, {}
+    snapshots = {int(s): {} for s in snapshot_steps}
     for name, matching in (("lstm_matching", True), ("lstm", False)):
         st, h = init, []
-        for i in range(0, n_steps, chunk):
-            k = min(chunk, n_steps - i)
+        for i, end in zip(starts, starts[1:] + [n_steps]):
+            if i in snapshots:
+                snapshots[i][name] = st.params
             st, l = _train_lstm(st, jax.random.fold_in(k_train, i), vae_params, latents, images,
-                                masks, vae_cfg, lstm_cfg, matching, k, batch)
+                                masks, vae_cfg, lstm_cfg, matching, end - i, batch)
             h.append(np.asarray(l))
+        if n_steps in snapshots:
+            snapshots[n_steps][name] = st.params
         params[name] = st.params
         hist[name] = np.concatenate(h) if h else np.zeros((0,))
-    return params, hist
+    return params, hist, snapshots
 
 
 def encode_frames(vae_params, vae_cfg, images, chunk: int = 1024) -> jnp.ndarray:
@@ -556,15 +600,16 @@ def encode_frames(vae_params, vae_cfg, images, chunk: int = 1024) -> jnp.ndarray
     return jnp.asarray(z.reshape(lead + (-1,)))
 
 
+_lstm_codes = jax.jit(lambda p, z: lstm_encode(p, z))  # one program for every set of weights
+
+
 def occlusion_models(vae_params, vae_cfg, lstm_params: dict) -> tuple[Callable, dict]:
     """(frame_encoder, heads) for `occlusion_retrieval`: the object-VAE mean per frame; the
     two LSTMs over each trajectory (from the zero state) and the identity for the VAE alone."""
-    enc_lstm = jax.jit(lambda p, z: lstm_encode(p, z))
-
     def frame_encoder(x):
         return np.asarray(encode_frames(vae_params, vae_cfg, x))
 
-    heads = {name: functools.partial(lambda p, z: np.asarray(enc_lstm(p, jnp.asarray(z))), p)
+    heads = {name: functools.partial(lambda p, z: np.asarray(_lstm_codes(p, jnp.asarray(z))), p)
              for name, p in lstm_params.items()}
     heads["vae"] = lambda z: np.asarray(z)
     return frame_encoder, heads
@@ -611,6 +656,50 @@ def write_occlusion(result: dict, out_dir: str, task: str, extra: dict | None = 
     with open(js, "w") as f:
         json.dump(summary, f, indent=1)
     return png, js
+
+
+def curve_row(step: int, res: dict, hist: dict, window: int = 20) -> dict:
+    """One point of the occlusion command's curve: `res` (`score_heads`) after `step` LSTM
+    steps, with the paired differences, the share of queries for which the auto-encoder LSTM
+    retrieves the very frame the object-VAE does, and each LSTM's mean training loss over
+    the `window` steps before (None at step 0)."""
+    e, r = res["errors_cm"], res["retrieved"]
+    return {"lstm_steps": int(step), "error_cm": res["error_cm"], "median_cm": res["median_cm"],
+            "lstm_matching_minus_lstm_cm": paired_difference(e["lstm_matching"], e["lstm"]),
+            "lstm_minus_vae_cm": paired_difference(e["lstm"], e["vae"]),
+            "lstm_retrieves_vae_frame": float(np.mean(r["lstm"] == r["vae"])),
+            "ordering_holds": ordering_holds(res),
+            "loss": {k: (float(np.mean(np.asarray(h)[max(0, step - window):step])) if step
+                         else None) for k, h in hist.items()}}
+
+
+def write_occlusion_curve(curve: list[dict], out_dir: str, task: str) -> str:
+    """Mean retrieval error of the three models against the LSTMs' training steps -> PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    steps = np.array([c["lstm_steps"] for c in curve], np.float64)
+    fig, ax = plt.subplots(figsize=(4.6, 3.4))
+    styles = {"lstm_matching": ("LSTM + matching loss", "tab:blue"),
+              "lstm": ("LSTM", "tab:orange"), "vae": ("object-VAE", "tab:green")}
+    for name, (label, color) in styles.items():
+        mean = np.array([c["error_cm"][name][0] for c in curve])
+        ax.plot(steps, mean, "o-", color=color, label=label, ms=4)
+        ax.axhline(PAPER_ERROR_CM[name], color=color, ls=":", lw=1)
+    ax.set_xscale("symlog", linthresh=100)
+    ax.set_xlabel("LSTM training steps (0: the shared initialisation)")
+    ax.set_ylabel("mean puck position error (cm)")
+    ax.set_title(f"{task}: retrieval along the LSTMs' training (dotted: paper)", fontsize=9)
+    ax.set_ylim(bottom=0)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    os.makedirs(out_dir, exist_ok=True)
+    png = os.path.join(out_dir, f"occlusion_curve_{task}.png")
+    fig.savefig(png, dpi=120)
+    plt.close(fig)
+    return png
 
 
 # ============================================================================ checkpoints / CLI
@@ -744,12 +833,19 @@ def run_occlusion(ckpt: str, out: str, task: str = "hurdle_top", n_train: int = 
     vae_state, vae_hist = finetune_vae(k_vae, pre.object_vae, vcfg,
                                        images[tr].reshape((-1, 48, 48, 3)),
                                        masks[tr].reshape((-1, 48, 48)), vae_steps)
-    lstm_params, lstm_hist = train_occlusion_lstms(k_lstm, vae_state.params, vcfg, cfg.lstm,
-                                                   images[tr], masks[tr], lstm_steps, batch)
+    curve_steps = [s for s in CURVE_STEPS if s < lstm_steps] + [lstm_steps]
+    lstm_params, lstm_hist, snaps = train_occlusion_lstms(
+        k_lstm, vae_state.params, vcfg, cfg.lstm, images[tr], masks[tr], lstm_steps, batch,
+        snapshot_steps=curve_steps)
     t_train = time.perf_counter() - t0 - t_data
-    frame_encoder, heads = occlusion_models(vae_state.params, vcfg, lstm_params)
-    res = occlusion_retrieval(k_occ, images[ev], masks[ev], puck[ev], frame_encoder, heads, drop,
-                              min_t=cfg.lstm.min_occlusion_t)
+    frame_encoder, _ = occlusion_models(vae_state.params, vcfg, lstm_params)
+    queries = occlusion_queries(k_occ, images[ev], masks[ev], frame_encoder, drop,
+                                min_t=cfg.lstm.min_occlusion_t)
+    curve = []
+    for step in curve_steps:
+        res = score_heads(*queries, puck[ev], occlusion_models(vae_state.params, vcfg,
+                                                                snaps[step])[1])
+        curve.append(curve_row(step, res, lstm_hist))
     seg_px = masks.reshape(masks.shape[0], masks.shape[1], -1).sum(-1)
     extra = {"preset": cfg.preset, "ckpt": os.path.abspath(ckpt), "seed": seed,
              "n_train_trajectories": n_train, "n_eval_trajectories": n_eval, "horizon": horizon,
@@ -759,9 +855,14 @@ def run_occlusion(ckpt: str, out: str, task: str = "hurdle_top", n_train: int = 
              "frames_without_object_pixels": float((seg_px == 0).mean()),
              "loss_first_last": {"vae": _first_last(vae_hist),
                                  **{k: _first_last(v) for k, v in lstm_hist.items()}},
-             "seconds": {"data": round(t_data, 1), "train": round(t_train, 1)}}
+             "seconds": {"data": round(t_data, 1), "train": round(t_train, 1)},
+             "ordering_holds": curve[-1]["ordering_holds"],
+             "ordering_holds_at_steps": [c["lstm_steps"] for c in curve if c["ordering_holds"]],
+             "curve": curve}
     png, js = write_occlusion(res, out, task, extra)
-    return {"task": task, "error_cm": res["error_cm"], "png": png, "json": js, **extra}
+    curve_png = write_occlusion_curve(curve, out, task)
+    return {"task": task, "error_cm": res["error_cm"], "png": png, "curve_png": curve_png,
+            "json": js, **extra}
 
 
 def _first_last(h) -> list | None:

@@ -276,12 +276,52 @@ def test_occlusion_models_train_and_retrieve_tiny():
     vcfg = object_vae_config("hurdle_top")
     lcfg = LSTMConfig(hidden=8, out_dim=vcfg.latent_dim)
     vae = encoders.init_vae(jax.random.PRNGKey(0), vcfg)
-    params, hist = analysis.train_occlusion_lstms(jax.random.PRNGKey(1), vae.params, vcfg, lcfg,
-                                                  images, masks, n_steps=2, batch=3)
+    params, hist, snaps = analysis.train_occlusion_lstms(
+        jax.random.PRNGKey(1), vae.params, vcfg, lcfg, images, masks, n_steps=3, batch=3,
+        chunk=2, snapshot_steps=(0, 1, 3))
     assert set(hist) == {"lstm_matching", "lstm"}
-    assert all(h.shape == (2,) and np.all(np.isfinite(h)) for h in hist.values())
+    assert all(h.shape == (3,) and np.all(np.isfinite(h)) for h in hist.values())
     frame_encoder, heads = analysis.occlusion_models(vae.params, vcfg, params)
     res = analysis.occlusion_retrieval(jax.random.PRNGKey(2), images, masks, pos,
                                        frame_encoder, heads)
     assert set(res["error_cm"]) == {"lstm_matching", "lstm", "vae"}
     assert all(np.isfinite(v).all() and v[0] >= 0 for v in res["error_cm"].values())
+
+    # Snapshots: step 0 is the shared initialisation, the last the returned weights, and a
+    # step in between is neither (the LSTMs did train).
+    leaves = lambda p: jax.tree.leaves(p)  # noqa: E731
+    for a, b in zip(leaves(snaps[0]["lstm"]), leaves(snaps[0]["lstm_matching"])):
+        np.testing.assert_array_equal(a, b)
+    for name in ("lstm", "lstm_matching"):
+        for a, b in zip(leaves(snaps[3][name]), leaves(params[name])):
+            np.testing.assert_array_equal(a, b)
+        assert any(not np.array_equal(a, b) for a, b in zip(leaves(snaps[1][name]),
+                                                            leaves(snaps[0][name])))
+    # The queries scored once serve every snapshot; the returned weights score as above.
+    queries = analysis.occlusion_queries(jax.random.PRNGKey(2), images, masks, frame_encoder)
+    final = analysis.score_heads(*queries, pos, analysis.occlusion_models(vae.params, vcfg,
+                                                                          snaps[3])[1])
+    assert final["error_cm"] == res["error_cm"]
+    row = analysis.curve_row(3, final, hist, window=2)
+    assert row["lstm_steps"] == 3 and row["loss"]["lstm"] == pytest.approx(hist["lstm"][1:].mean())
+    assert analysis.curve_row(0, final, hist)["loss"] == {"lstm_matching": None, "lstm": None}
+    with pytest.raises(ValueError, match="snapshot_steps"):
+        analysis.train_occlusion_lstms(jax.random.PRNGKey(1), vae.params, vcfg, lcfg, images,
+                                       masks, n_steps=3, batch=3, snapshot_steps=(4,))
+
+
+def test_ordering_needs_each_step_separated_beyond_two_standard_errors(tmp_path):
+    rng = np.random.default_rng(5)
+    vae = rng.uniform(2.0, 4.0, 200)
+    res = {"errors_cm": {"lstm_matching": vae - 2.0, "lstm": vae - 1.0, "vae": vae}}
+    assert analysis.ordering_holds(res)
+    # The auto-encoder LSTM that retrieves what the object-VAE retrieves: not separated.
+    res["errors_cm"]["lstm"] = vae + rng.normal(0.0, 0.05, 200)
+    assert not analysis.ordering_holds(res)
+    diff = analysis.paired_difference(res["errors_cm"]["lstm"], vae)
+    assert abs(diff[0]) < 3 * diff[1] and diff[1] == pytest.approx(0.05 / np.sqrt(200), rel=0.2)
+    curve = [{"lstm_steps": s, "error_cm": {k: [m, 0.1] for k, m in
+                                            zip(analysis.OCCLUSION_MODELS, (0.6, e, 2.4))}}
+             for s, e in ((0, 0.6), (100, 0.9), (2000, 2.4))]
+    png = analysis.write_occlusion_curve(curve, str(tmp_path), "hurdle_top")
+    assert os.path.getsize(png) > 1000
