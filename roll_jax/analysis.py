@@ -431,9 +431,11 @@ def occlude_frames(key, images, masks, drop: float = OCCLUSION_DROP, min_t: int 
     return np.asarray(t), np.asarray(occ)
 
 
-def retrieval_errors(clean_codes, query_codes, positions, occ_t) -> tuple[np.ndarray, np.ndarray]:
-    """Nearest clean frame (L2 in code space, over all B*T frames) of each query; returns
-    (position error per query [B] in the units of `positions`, retrieved flat index [B]).
+def retrieval_errors(clean_codes, query_codes, positions, occ_t, exclude_own: bool = False
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """Nearest clean frame (L2 in code space, over all B*T frames, or with `exclude_own` over
+    the frames of the other trajectories) of each query; returns (position error per query
+    [B] in the units of `positions`, retrieved flat index [B]).
 
     clean_codes [B, T, d]; query_codes [B, d]; positions [B, T, k]; occ_t [B]."""
     clean = np.asarray(clean_codes, np.float64)
@@ -441,6 +443,8 @@ def retrieval_errors(clean_codes, query_codes, positions, occ_t) -> tuple[np.nda
     pool = clean.reshape(b * t_len, d)
     q = np.asarray(query_codes, np.float64)
     d2 = (np.sum(q * q, 1)[:, None] - 2.0 * q @ pool.T + np.sum(pool * pool, 1)[None, :])
+    if exclude_own:
+        d2[np.arange(b * t_len)[None, :] // t_len == np.arange(b)[:, None]] = np.inf
     nn = np.argmin(d2, axis=1)
     pos = np.asarray(positions, np.float64)
     truth = pos[np.arange(b), np.asarray(occ_t)]
@@ -463,9 +467,9 @@ def occlusion_queries(key, images, masks, frame_encoder: Callable,
 
 
 def score_heads(lat, occ_seq, occ_t, positions, heads: dict[str, Callable],
-                scale: float = 100.0) -> dict:
+                scale: float = 100.0, exclude_own: bool = False) -> dict:
     """Retrieval error of each head on the queries of `occlusion_queries` (keys as
-    `occlusion_retrieval`'s)."""
+    `occlusion_retrieval`'s; `exclude_own`: retrieve from the other trajectories only)."""
     b, t_len = lat.shape[:2]
     pos = np.asarray(positions, np.float64)
     truth = pos[np.arange(b), occ_t]
@@ -475,7 +479,7 @@ def score_heads(lat, occ_seq, occ_t, positions, heads: dict[str, Callable],
     for name, head in heads.items():
         clean = np.asarray(head(lat))
         query = np.asarray(head(occ_seq))[np.arange(b), occ_t]
-        err, nn = retrieval_errors(clean, query, positions, occ_t)
+        err, nn = retrieval_errors(clean, query, positions, occ_t, exclude_own)
         err = err * scale
         out["errors_cm"][name] = err
         out["retrieved"][name] = nn
@@ -658,13 +662,19 @@ def write_occlusion(result: dict, out_dir: str, task: str, extra: dict | None = 
     return png, js
 
 
-def curve_row(step: int, res: dict, hist: dict, window: int = 20) -> dict:
+def curve_row(step: int, res: dict, hist: dict, others: dict | None = None,
+              window: int = 20) -> dict:
     """One point of the occlusion command's curve: `res` (`score_heads`) after `step` LSTM
     steps, with the paired differences, the share of queries for which the auto-encoder LSTM
-    retrieves the very frame the object-VAE does, and each LSTM's mean training loss over
-    the `window` steps before (None at step 0)."""
+    retrieves the very frame the object-VAE does, each LSTM's mean training loss over the
+    `window` steps before (None at step 0), and `others` (`score_heads` on the other
+    trajectories' frames) summarised under "other_trajectories"."""
     e, r = res["errors_cm"], res["retrieved"]
+    extra = {} if others is None else {"other_trajectories": {
+        "error_cm": others["error_cm"], "median_cm": others["median_cm"],
+        "ordering_holds": ordering_holds(others)}}
     return {"lstm_steps": int(step), "error_cm": res["error_cm"], "median_cm": res["median_cm"],
+            **extra,
             "lstm_matching_minus_lstm_cm": paired_difference(e["lstm_matching"], e["lstm"]),
             "lstm_minus_vae_cm": paired_difference(e["lstm"], e["vae"]),
             "lstm_retrieves_vae_frame": float(np.mean(r["lstm"] == r["vae"])),
@@ -681,19 +691,23 @@ def write_occlusion_curve(curve: list[dict], out_dir: str, task: str) -> str:
     import matplotlib.pyplot as plt
 
     steps = np.array([c["lstm_steps"] for c in curve], np.float64)
-    fig, ax = plt.subplots(figsize=(4.6, 3.4))
+    fig, ax = plt.subplots(figsize=(5.2, 3.8))
     styles = {"lstm_matching": ("LSTM + matching loss", "tab:blue"),
               "lstm": ("LSTM", "tab:orange"), "vae": ("object-VAE", "tab:green")}
     for name, (label, color) in styles.items():
         mean = np.array([c["error_cm"][name][0] for c in curve])
         ax.plot(steps, mean, "o-", color=color, label=label, ms=4)
         ax.axhline(PAPER_ERROR_CM[name], color=color, ls=":", lw=1)
+        if all("other_trajectories" in c for c in curve):
+            other = [c["other_trajectories"]["error_cm"][name][0] for c in curve]
+            ax.plot(steps, other, "s--", color=color, ms=3, lw=1, alpha=0.7,
+                    label=f"{label}, other trajectories' frames")
     ax.set_xscale("symlog", linthresh=100)
     ax.set_xlabel("LSTM training steps (0: the shared initialisation)")
     ax.set_ylabel("mean puck position error (cm)")
     ax.set_title(f"{task}: retrieval along the LSTMs' training (dotted: paper)", fontsize=9)
+    ax.legend(fontsize=6)
     ax.set_ylim(bottom=0)
-    ax.legend(fontsize=7)
     fig.tight_layout()
     os.makedirs(out_dir, exist_ok=True)
     png = os.path.join(out_dir, f"occlusion_curve_{task}.png")
@@ -843,9 +857,13 @@ def run_occlusion(ckpt: str, out: str, task: str = "hurdle_top", n_train: int = 
                                 min_t=cfg.lstm.min_occlusion_t)
     curve = []
     for step in curve_steps:
-        res = score_heads(*queries, puck[ev], occlusion_models(vae_state.params, vcfg,
-                                                                snaps[step])[1])
-        curve.append(curve_row(step, res, lstm_hist))
+        heads = occlusion_models(vae_state.params, vcfg, snaps[step])[1]
+        res = score_heads(*queries, puck[ev], heads)
+        # The paper's pool holds the query's own clean trajectory, whose codes share the
+        # query's history: an LSTM that reads its history more than its input finds the
+        # frame without locating the puck. Retrieving from the other trajectories cannot.
+        others = score_heads(*queries, puck[ev], heads, exclude_own=True)
+        curve.append(curve_row(step, res, lstm_hist, others))
     seg_px = masks.reshape(masks.shape[0], masks.shape[1], -1).sum(-1)
     extra = {"preset": cfg.preset, "ckpt": os.path.abspath(ckpt), "seed": seed,
              "n_train_trajectories": n_train, "n_eval_trajectories": n_eval, "horizon": horizon,
@@ -856,6 +874,8 @@ def run_occlusion(ckpt: str, out: str, task: str = "hurdle_top", n_train: int = 
              "loss_first_last": {"vae": _first_last(vae_hist),
                                  **{k: _first_last(v) for k, v in lstm_hist.items()}},
              "seconds": {"data": round(t_data, 1), "train": round(t_train, 1)},
+             "error_cm_other_trajectories": others["error_cm"],
+             "median_cm_other_trajectories": others["median_cm"],
              "ordering_holds": curve[-1]["ordering_holds"],
              "ordering_holds_at_steps": [c["lstm_steps"] for c in curve if c["ordering_holds"]],
              "curve": curve}

@@ -247,6 +247,20 @@ def test_retrieval_errors_uses_history_head():
     err, nn = analysis.retrieval_errors(clean, clean[np.arange(b), occ_t], pos, occ_t)
     np.testing.assert_array_equal(err, 0.0)
     np.testing.assert_array_equal(nn, np.arange(b) * t_len + occ_t)
+    # From the other trajectories only, the query's own frame cannot be retrieved.
+    err, nn = analysis.retrieval_errors(clean, clean[np.arange(b), occ_t], pos, occ_t,
+                                        exclude_own=True)
+    assert np.all(nn // t_len != np.arange(b)) and np.all(err > 0)
+
+
+def test_retrieval_from_other_trajectories_finds_the_same_position_elsewhere():
+    pos = np.array([[[0.0, 0.0], [1.0, 0.0]], [[5.0, 5.0], [1.0, 0.01]], [[9.0, 9.0], [8.0, 8.0]]])
+    occ_t = np.array([1, 1, 1])
+    err, nn = analysis.retrieval_errors(pos, pos[np.arange(3), occ_t], pos, occ_t,
+                                        exclude_own=True)
+    assert nn[0] == 3 and nn[1] == 1  # each other's frame 1, 1 cm apart in the second axis
+    np.testing.assert_allclose(err[:2], 0.01)
+    assert nn[2] == 2 and err[2] == pytest.approx(np.sqrt(18.0))  # (5, 5): its own is out
 
 
 def test_puck_paths_stay_clear_of_the_hurdle():
@@ -302,8 +316,12 @@ def test_occlusion_models_train_and_retrieve_tiny():
     final = analysis.score_heads(*queries, pos, analysis.occlusion_models(vae.params, vcfg,
                                                                           snaps[3])[1])
     assert final["error_cm"] == res["error_cm"]
-    row = analysis.curve_row(3, final, hist, window=2)
+    others = analysis.score_heads(*queries, pos, analysis.occlusion_models(vae.params, vcfg,
+                                                                           snaps[3])[1],
+                                  exclude_own=True)
+    row = analysis.curve_row(3, final, hist, others, window=2)
     assert row["lstm_steps"] == 3 and row["loss"]["lstm"] == pytest.approx(hist["lstm"][1:].mean())
+    assert row["other_trajectories"]["error_cm"] == others["error_cm"]
     assert analysis.curve_row(0, final, hist)["loss"] == {"lstm_matching": None, "lstm": None}
     with pytest.raises(ValueError, match="snapshot_steps"):
         analysis.train_occlusion_lstms(jax.random.PRNGKey(1), vae.params, vcfg, lcfg, images,
