@@ -13,7 +13,8 @@
    in latent space is retrieved from the pool of all clean frames, and the error is the true
    puck distance between the retrieved frame and the occluded one. Models: (1) LSTM trained
    with the matching loss, (2) the same LSTM trained without it, (3) the object-VAE alone;
-   all three on the same object-VAE, trained on the same trajectories.
+   all three on the same object-VAE, trained on the same trajectories. The models are also
+   scored along the LSTMs' training (`curve`).
 
        python -m roll_jax.analysis occlusion --ckpt DIR [--out DIR]
 
@@ -859,9 +860,9 @@ def run_occlusion(ckpt: str, out: str, task: str = "hurdle_top", n_train: int = 
     for step in curve_steps:
         heads = occlusion_models(vae_state.params, vcfg, snaps[step])[1]
         res = score_heads(*queries, puck[ev], heads)
-        # The paper's pool holds the query's own clean trajectory, whose codes share the
-        # query's history: an LSTM that reads its history more than its input finds the
-        # frame without locating the puck. Retrieving from the other trajectories cannot.
+        # The paper's pool holds the query's own clean trajectory, whose LSTM codes share
+        # the query's history; retrieving from the other trajectories only checks that the
+        # codes locate the puck rather than the trajectory.
         others = score_heads(*queries, puck[ev], heads, exclude_own=True)
         curve.append(curve_row(step, res, lstm_hist, others))
     seg_px = masks.reshape(masks.shape[0], masks.shape[1], -1).sum(-1)
