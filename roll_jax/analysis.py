@@ -664,16 +664,19 @@ def write_occlusion(result: dict, out_dir: str, task: str, extra: dict | None = 
 
 
 def curve_row(step: int, res: dict, hist: dict, others: dict | None = None,
-              window: int = 20) -> dict:
+              clean: dict | None = None, window: int = 20) -> dict:
     """One point of the occlusion command's curve: `res` (`score_heads`) after `step` LSTM
     steps, with the paired differences, the share of queries for which the auto-encoder LSTM
     retrieves the very frame the object-VAE does, each LSTM's mean training loss over the
-    `window` steps before (None at step 0), and `others` (`score_heads` on the other
-    trajectories' frames) summarised under "other_trajectories"."""
+    `window` steps before (None at step 0), `others` (`score_heads` on the other
+    trajectories' frames) under "other_trajectories" and `clean` (the same for the clean
+    frames at the occluded steps) under "clean_frames"."""
     e, r = res["errors_cm"], res["retrieved"]
     extra = {} if others is None else {"other_trajectories": {
         "error_cm": others["error_cm"], "median_cm": others["median_cm"],
         "ordering_holds": ordering_holds(others)}}
+    if clean is not None:
+        extra["clean_frames"] = {"error_cm": clean["error_cm"], "median_cm": clean["median_cm"]}
     return {"lstm_steps": int(step), "error_cm": res["error_cm"], "median_cm": res["median_cm"],
             **extra,
             "lstm_matching_minus_lstm_cm": paired_difference(e["lstm_matching"], e["lstm"]),
@@ -856,6 +859,7 @@ def run_occlusion(ckpt: str, out: str, task: str = "hurdle_top", n_train: int = 
     frame_encoder, _ = occlusion_models(vae_state.params, vcfg, lstm_params)
     queries = occlusion_queries(k_occ, images[ev], masks[ev], frame_encoder, drop,
                                 min_t=cfg.lstm.min_occlusion_t)
+    lat, _, occ_t = queries
     curve = []
     for step in curve_steps:
         heads = occlusion_models(vae_state.params, vcfg, snaps[step])[1]
@@ -864,7 +868,10 @@ def run_occlusion(ckpt: str, out: str, task: str = "hurdle_top", n_train: int = 
         # the query's history; retrieving from the other trajectories only checks that the
         # codes locate the puck rather than the trajectory.
         others = score_heads(*queries, puck[ev], heads, exclude_own=True)
-        curve.append(curve_row(step, res, lstm_hist, others))
+        # The same frames unoccluded, from the other trajectories: how well each code
+        # locates the puck it is shown, the baseline of the occluded frames' errors.
+        clean = score_heads(lat, lat, occ_t, puck[ev], heads, exclude_own=True)
+        curve.append(curve_row(step, res, lstm_hist, others, clean))
     seg_px = masks.reshape(masks.shape[0], masks.shape[1], -1).sum(-1)
     extra = {"preset": cfg.preset, "ckpt": os.path.abspath(ckpt), "seed": seed,
              "n_train_trajectories": n_train, "n_eval_trajectories": n_eval, "horizon": horizon,
@@ -877,6 +884,7 @@ def run_occlusion(ckpt: str, out: str, task: str = "hurdle_top", n_train: int = 
              "seconds": {"data": round(t_data, 1), "train": round(t_train, 1)},
              "error_cm_other_trajectories": others["error_cm"],
              "median_cm_other_trajectories": others["median_cm"],
+             "error_cm_clean_frames": clean["error_cm"],
              "ordering_holds": curve[-1]["ordering_holds"],
              "ordering_holds_at_steps": [c["lstm_steps"] for c in curve if c["ordering_holds"]],
              "curve": curve}

@@ -319,9 +319,10 @@ def test_occlusion_models_train_and_retrieve_tiny():
     others = analysis.score_heads(*queries, pos, analysis.occlusion_models(vae.params, vcfg,
                                                                            snaps[3])[1],
                                   exclude_own=True)
-    row = analysis.curve_row(3, final, hist, others, window=2)
+    row = analysis.curve_row(3, final, hist, others, final, window=2)
     assert row["lstm_steps"] == 3 and row["loss"]["lstm"] == pytest.approx(hist["lstm"][1:].mean())
     assert row["other_trajectories"]["error_cm"] == others["error_cm"]
+    assert row["clean_frames"]["median_cm"] == final["median_cm"]
     assert analysis.curve_row(0, final, hist)["loss"] == {"lstm_matching": None, "lstm": None}
     with pytest.raises(ValueError, match="snapshot_steps"):
         analysis.train_occlusion_lstms(jax.random.PRNGKey(1), vae.params, vcfg, lcfg, images,
