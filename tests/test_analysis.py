@@ -258,7 +258,7 @@ def test_retrieval_from_other_trajectories_finds_the_same_position_elsewhere():
     occ_t = np.array([1, 1, 1])
     err, nn = analysis.retrieval_errors(pos, pos[np.arange(3), occ_t], pos, occ_t,
                                         exclude_own=True)
-    assert nn[0] == 3 and nn[1] == 1  # each other's frame 1, 1 cm apart in the second axis
+    assert nn[0] == 3 and nn[1] == 1  # each other's frame 1, 0.01 apart in the second axis
     np.testing.assert_allclose(err[:2], 0.01)
     assert nn[2] == 2 and err[2] == pytest.approx(np.sqrt(18.0))  # (5, 5): its own is out
 
@@ -303,14 +303,15 @@ def test_occlusion_models_train_and_retrieve_tiny():
 
     # Snapshots: step 0 is the shared initialisation, the last the returned weights, and a
     # step in between is neither (the LSTMs did train).
-    leaves = lambda p: jax.tree.leaves(p)  # noqa: E731
+    leaves = jax.tree.leaves
     for a, b in zip(leaves(snaps[0]["lstm"]), leaves(snaps[0]["lstm_matching"])):
         np.testing.assert_array_equal(a, b)
     for name in ("lstm", "lstm_matching"):
         for a, b in zip(leaves(snaps[3][name]), leaves(params[name])):
             np.testing.assert_array_equal(a, b)
-        assert any(not np.array_equal(a, b) for a, b in zip(leaves(snaps[1][name]),
-                                                            leaves(snaps[0][name])))
+        for other in (snaps[0][name], params[name]):
+            assert any(not np.array_equal(a, b) for a, b in zip(leaves(snaps[1][name]),
+                                                                leaves(other)))
     # The queries scored once serve every snapshot; the returned weights score as above.
     queries = analysis.occlusion_queries(jax.random.PRNGKey(2), images, masks, frame_encoder)
     final = analysis.score_heads(*queries, pos, analysis.occlusion_models(vae.params, vcfg,
