@@ -852,11 +852,11 @@ def run_occlusion(ckpt: str, out: str, task: str = "hurdle_top", n_train: int = 
                                        images[tr].reshape((-1, 48, 48, 3)),
                                        masks[tr].reshape((-1, 48, 48)), vae_steps)
     curve_steps = [s for s in CURVE_STEPS if s < lstm_steps] + [lstm_steps]
-    lstm_params, lstm_hist, snaps = train_occlusion_lstms(
+    _, lstm_hist, snaps = train_occlusion_lstms(
         k_lstm, vae_state.params, vcfg, cfg.lstm, images[tr], masks[tr], lstm_steps, batch,
-        snapshot_steps=curve_steps)
+        snapshot_steps=curve_steps)  # snaps[lstm_steps]: the final weights
     t_train = time.perf_counter() - t0 - t_data
-    frame_encoder, _ = occlusion_models(vae_state.params, vcfg, lstm_params)
+    frame_encoder, _ = occlusion_models(vae_state.params, vcfg, {})
     queries = occlusion_queries(k_occ, images[ev], masks[ev], frame_encoder, drop,
                                 min_t=cfg.lstm.min_occlusion_t)
     lat, _, occ_t = queries
@@ -872,6 +872,7 @@ def run_occlusion(ckpt: str, out: str, task: str = "hurdle_top", n_train: int = 
         # locates the puck it is shown, the baseline of the occluded frames' errors.
         clean = score_heads(lat, lat, occ_t, puck[ev], heads, exclude_own=True)
         curve.append(curve_row(step, res, lstm_hist, others, clean))
+    # res, others and clean are now the final weights' (curve_steps ends at lstm_steps).
     seg_px = masks.reshape(masks.shape[0], masks.shape[1], -1).sum(-1)
     extra = {"preset": cfg.preset, "ckpt": os.path.abspath(ckpt), "seed": seed,
              "n_train_trajectories": n_train, "n_eval_trajectories": n_eval, "horizon": horizon,
