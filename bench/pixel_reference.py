@@ -1,7 +1,8 @@
 """What Figure 5's observations allow, per task: the perfect-segmentation yardstick
 (`analysis.pixel_reference`: the centroid of the true object pixels, the mean centroid where
-the arm hides the object) and the shares of observations whose object is hidden or partly
-hidden, for several analysis seeds. No checkpoint: the renderer's labels only.
+the arm hides the object), the known-state reference (`analysis.known_reference`: the true
+state wherever the object shows) and the shares of observations whose object is hidden or
+partly hidden, for several analysis seeds. No checkpoint: the renderer's labels only.
 
     python bench/pixel_reference.py [--tasks T ...] [--seeds 0 1 2] [--n 500]
 
@@ -22,6 +23,7 @@ from bench.common import write_results  # noqa: E402
 
 RESULTS = os.path.join(ROOT, "bench", "results", "pixel_reference.json")
 KEYS = ("reference_spearman_object", "reference_pairwise_spearman", "reference_r2",
+        "known_spearman_object", "known_pairwise_spearman", "known_r2",
         "share_object_hidden", "share_object_partly_hidden")
 
 

@@ -182,18 +182,36 @@ def pixel_reference(obs: ObservationSet) -> dict:
     the centroid (pixels) of the ground-truth object pixels, and where the object is hidden
     the mean centroid of the other observations (the best constant guess). Not a bound on a
     learned encoder, a yardstick: what the observations allow an encoder that sees only the
-    object's visible pixels."""
+    object's visible pixels. With `known_reference`'s statistics (`known_*`) beside it."""
     vis = object_visibility(obs.labels)
     hidden = vis < HIDDEN_SHARE
+    known = known_reference(obs, hidden)  # refuses observations that all hide the object
     c = _centroids(obs.labels)
-    if (~hidden).any():
-        c = np.where(hidden[:, None], c[~hidden].mean(0), c)
+    c = np.where(hidden[:, None], c[~hidden].mean(0), c)
     d = np.linalg.norm(c - _centroids(obs.goal_labels[None])[0], axis=-1)
     return {"reference_spearman_object": spearman(obs.distances, d),
             "reference_pairwise_spearman": pairwise_spearman(c, obs.states),
             "reference_r2": position_r2(c, obs.states),
+            **known,
             "share_object_hidden": float(hidden.mean()),
             "share_object_partly_hidden": float(((vis >= HIDDEN_SHARE) & (vis < WHOLE_SHARE)).mean())}
+
+
+def known_reference(obs: ObservationSet, hidden) -> dict:
+    """The same statistics for an encoder that knows the object's true state wherever it
+    shows (`hidden` [n] False) and gives hidden objects the shown ones' mean state: what the
+    observations allow an encoder that sees through the arm's partial occlusions, where
+    `pixel_reference`'s centroid sees only the visible pixels."""
+    hidden = np.asarray(hidden, bool)
+    if hidden.all():
+        raise ValueError(f"every one of the {len(hidden)} observations hides the object")
+    guess = obs.states[~hidden].mean(0)
+    est = np.where(hidden[:, None], guess, obs.states)
+    # Shown objects are where they are: their distance to the goal is the true one.
+    d = np.where(hidden, np.linalg.norm(guess - obs.goal_state), obs.distances)
+    return {"known_spearman_object": spearman(obs.distances, d),
+            "known_pairwise_spearman": pairwise_spearman(est, obs.states),
+            "known_r2": position_r2(est, obs.states)}
 
 
 def _r2(predicted, y) -> float:

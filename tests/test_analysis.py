@@ -118,6 +118,22 @@ def test_pixel_reference_ranks_visible_discs_and_counts_hidden_ones():
     assert hidden["reference_spearman_object"] < ref["reference_spearman_object"] - 0.05
     np.testing.assert_allclose(analysis.object_visibility(covered)[:20], 0.0)
 
+    # The known-state reference: exact where nothing hides the object; with the 20 hidden
+    # discs at the shown ones' mean it loses rank, but sees through the 30 half-hidden ones,
+    # which pull the visible centroid off the centre.
+    assert ref["known_spearman_object"] == pytest.approx(1.0)
+    assert ref["known_r2"] == pytest.approx(1.0)
+    assert ref["known_pairwise_spearman"] == pytest.approx(1.0)
+    guess = pos[20:].mean(0)
+    est = np.concatenate([np.repeat(guess[None], 20, 0), pos[20:]])
+    assert hidden["known_r2"] == pytest.approx(analysis.position_r2(est, pos))
+    d = np.concatenate([np.full(20, np.linalg.norm(guess - goal)), obs.distances[20:]])
+    assert hidden["known_spearman_object"] == pytest.approx(analysis.spearman(obs.distances, d))
+    assert hidden["known_spearman_object"] < 0.99
+    assert hidden["known_pairwise_spearman"] > hidden["reference_pairwise_spearman"]
+    with pytest.raises(ValueError, match="every one of the 200 observations hides"):
+        analysis.pixel_reference(dataclasses.replace(obs, labels=np.where(labels == 2, 1, labels)))
+
 
 def test_goal_mask_scores_compare_the_goal_mask_with_its_labels():
     from configs.segmentation import segmentation_config
