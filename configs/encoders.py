@@ -79,6 +79,11 @@ class VAEConfig:
     # object and the hand placed independently. The reference code pretrains on "set to goal"
     # images only (1.0); 0 keeps every placement of the goal space equally likely.
     pretrain_goal_share: float = 0.0
+    # Not in the paper: a second matching loss, between the codes of two renderings of one
+    # pre-training object state with the hand at two random places in its box (the arm hides
+    # the object as it does, where `occlusion_shape` drops pixels), times this coefficient;
+    # 0 leaves it out. docs/analysis.md, "Seeing through the arm".
+    arm_pair_coef: float = 0.0
     image_size: int = 48  # "Implementation details": 48 x 48 images
     # Not in the paper. Reference code: logvar = log(1e-3) + |dense|, a variance floor.
     min_variance: float = 1e-3
@@ -128,8 +133,9 @@ class VAEConfig:
                              f"positive divisor of batch_size={self.batch_size}")
         if self.beta < 0:
             raise ValueError(f"VAEConfig.beta must be >= 0, got {self.beta!r}")
-        if self.matching_coef < 0:
-            raise ValueError(f"VAEConfig.matching_coef must be >= 0, got {self.matching_coef!r}")
+        for name in ("matching_coef", "arm_pair_coef"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"VAEConfig.{name} must be >= 0, got {getattr(self, name)!r}")
         if not 0.0 <= self.occlusion_drop <= 1.0:
             raise ValueError(f"VAEConfig.occlusion_drop must be in [0, 1], got {self.occlusion_drop!r}")
         for name in ("pretrain_occluded_fraction", "pretrain_occluded_drop",

@@ -548,13 +548,15 @@ def _finetune_vae(state, key, images, masks, cfg):
 
 def finetune_vae(key, state: encoders.ModelState, cfg, images, masks, n_steps: int,
                  batch: int | None = None, chunk: int = 100):
-    """`n_steps` object-VAE steps (its config's loss: beta-VAE + VAE matching) on frames
-    [N, 48, 48, 3] with object masks [N, 48, 48]. Returns (state, losses [n_steps])."""
+    """`n_steps` object-VAE steps (its config's loss: beta-VAE + VAE matching; the trajectory
+    frames have no arm-pair partners) on frames [N, 48, 48, 3] with object masks [N, 48, 48].
+    Returns (state, losses [n_steps])."""
     images, masks = jnp.asarray(images), jnp.asarray(masks)
     batch = batch or cfg.batch_size
     hist = []
     for i in range(0, n_steps, chunk):
-        c = dataclasses.replace(cfg, batch_size=batch, batches_per_epoch=min(chunk, n_steps - i))
+        c = dataclasses.replace(cfg, batch_size=batch, batches_per_epoch=min(chunk, n_steps - i),
+                                arm_pair_coef=0.0)
         state, m = _finetune_vae(state, jax.random.fold_in(key, i), images, masks, c)
         hist.append(np.asarray(m["loss"]))
     return state, (np.concatenate(hist) if hist else np.zeros((0,)))

@@ -120,11 +120,20 @@ def grad_parts(cfg: VAEConfig, batch: int) -> int:
 
 
 def vae_train_step(state: ModelState, key: jax.Array, images: jax.Array, cfg: VAEConfig,
-                   object_masks: jax.Array | None = None) -> tuple[ModelState, dict]:
+                   object_masks: jax.Array | None = None, partners: jax.Array | None = None
+                   ) -> tuple[ModelState, dict]:
     """One Adam step on a batch of images [B, 48, 48, 3] uint8; adds the matching loss on
-    synthetically occluded copies when cfg.matching_coef > 0 (object-VAE)."""
+    synthetically occluded copies when cfg.matching_coef > 0 (object-VAE), and the arm-pair
+    matching loss against `partners` (the same object states, the arm elsewhere) when
+    cfg.arm_pair_coef > 0."""
     check_images(images)
     _check_masks(object_masks, images)
+    if (partners is None) != (cfg.arm_pair_coef == 0):
+        raise ValueError(f"partner images go with arm_pair_coef > 0 (got {cfg.arm_pair_coef!r} "
+                         f"and {'no ' if partners is None else ''}partners)")
+    if partners is not None and partners.shape != images.shape:
+        raise ValueError(f"partners must have the images' shape {tuple(images.shape)}, got "
+                         f"{tuple(partners.shape)}")
     k_noise, k_occ = jax.random.split(key)
     occluded = None
     if cfg.matching_coef > 0:
@@ -134,13 +143,14 @@ def vae_train_step(state: ModelState, key: jax.Array, images: jax.Array, cfg: VA
     noise = jax.random.normal(k_noise, (images.shape[0], cfg.latent_dim))
 
     def loss_fn(p, batch):
-        x, eps, x_occ = batch
+        x, eps, x_occ, x_pair = batch
         return losses.vae_loss(p, vae_model(cfg), x, eps, cfg.effective_beta,
                                occluded=x_occ, matching_coef=cfg.matching_coef,
                                one_sided=cfg.matching_one_sided,
-                               recon_reduction=cfg.recon_reduction)
+                               recon_reduction=cfg.recon_reduction,
+                               partners=x_pair, pair_coef=cfg.arm_pair_coef)
 
-    grads, metrics = grad_in_parts(loss_fn, state.params, (images, noise, occluded),
+    grads, metrics = grad_in_parts(loss_fn, state.params, (images, noise, occluded, partners),
                                    grad_parts(cfg, images.shape[0]))
     updates, opt_state = vae_optimizer(cfg).update(grads, state.opt_state, state.params)
     params = optax.apply_updates(state.params, updates)
@@ -148,10 +158,12 @@ def vae_train_step(state: ModelState, key: jax.Array, images: jax.Array, cfg: VA
 
 
 def vae_fit_epoch(state: ModelState, key: jax.Array, dataset: jax.Array, cfg: VAEConfig,
-                  object_masks: jax.Array | None = None) -> tuple[ModelState, dict]:
+                  object_masks: jax.Array | None = None, partners: jax.Array | None = None
+                  ) -> tuple[ModelState, dict]:
     """cfg.batches_per_epoch steps on minibatches of cfg.batch_size drawn uniformly (with
-    replacement, as rlkit does) from dataset [N, 48, 48, 3]; one lax.scan. Returns the
-    per-batch metrics stacked [batches_per_epoch]."""
+    replacement, as rlkit does) from dataset [N, 48, 48, 3] (and the same rows of `partners`,
+    `vae_train_step`'s); one lax.scan. Returns the per-batch metrics stacked
+    [batches_per_epoch]."""
     check_images(dataset, "dataset")
     _check_masks(object_masks, dataset)
     n = dataset.shape[0]
@@ -160,7 +172,8 @@ def vae_fit_epoch(state: ModelState, key: jax.Array, dataset: jax.Array, cfg: VA
         k_idx, k_step = jax.random.split(k)
         idx = jax.random.randint(k_idx, (cfg.batch_size,), 0, n)
         masks = None if object_masks is None else object_masks[idx]
-        return vae_train_step(st, k_step, dataset[idx], cfg, masks)
+        pairs = None if partners is None else partners[idx]
+        return vae_train_step(st, k_step, dataset[idx], cfg, masks, pairs)
 
     return jax.lax.scan(body, state, jax.random.split(key, cfg.batches_per_epoch))
 

@@ -81,10 +81,14 @@ def vae_matching_loss(params: Any, model: ConvVAE, images: jax.Array, occluded: 
 
 def vae_loss(params: Any, model: ConvVAE, images: jax.Array, noise: jax.Array, beta: float,
              occluded: jax.Array | None = None, matching_coef: float = 0.0,
-             one_sided: bool = False, recon_reduction: str = "sum") -> tuple[jax.Array, dict]:
+             one_sided: bool = False, recon_reduction: str = "sum",
+             partners: jax.Array | None = None, pair_coef: float = 0.0
+             ) -> tuple[jax.Array, dict]:
     """beta-VAE loss: squared error (Gaussian identity-variance NLL up to a constant) + beta KL,
-    batch mean; plus matching_coef * L^matching when `occluded` images are given. `noise`
-    [B, latent_dim]: the standard normal draws of the reparameterisation z = mean + std * noise.
+    batch mean; plus matching_coef * L^matching when `occluded` images are given, and
+    pair_coef * the batch mean of ||mu(images) - mu(partners)||^2 when `partners` (the same
+    object states, the arm elsewhere) are. `noise` [B, latent_dim]: the standard normal draws
+    of the reparameterisation z = mean + std * noise.
 
     recon_reduction "sum" sums the squared error over pixels (the log-likelihood); "mean"
     averages it (reference-code scale).
@@ -108,6 +112,12 @@ def vae_loss(params: Any, model: ConvVAE, images: jax.Array, noise: jax.Array, b
         match = jnp.mean(matching_distance(mean, m_occ, one_sided))
         loss = loss + matching_coef * match
         metrics["matching"] = match
+    if partners is not None:
+        check_images(partners, "partners")
+        m_pair, _ = model.apply(params, partners, method=ConvVAE.encode)
+        pair = jnp.mean(matching_distance(mean, m_pair))
+        loss = loss + pair_coef * pair
+        metrics["pair"] = pair
     metrics["loss"] = loss
     return loss, metrics
 

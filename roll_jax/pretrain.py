@@ -84,25 +84,38 @@ def _random_episodes_fn(env):
     return jax.jit(jax.vmap(one))
 
 
-def object_dataset(env, seg_params, key, n_images: int, goal_share: float = 0.0):
+def object_dataset(env, seg_params, key, n_images: int, goal_share: float = 0.0,
+                   arm_pairs: bool = False):
     """(segmented images uint8 [n, 48, 48, 3], object masks bool [n, 48, 48]) of random object
     placements, masks from `segment`; the first round(goal_share * n) are states set to goals
     (`env.sample_goal`) instead. The placements are taken as placed (like the goal images),
     not settled by a few physics steps: that keeps MJX's step, the slowest program to compile,
-    out of this one."""
+    out of this one. `arm_pairs`: also the partners (images, masks) of `VAEConfig.arm_pair_coef`,
+    each image's object state with the hand at another random place; a goal image is its own
+    partner. The first two arrays do not depend on `arm_pairs`."""
     if not 0.0 <= goal_share <= 1.0:
         raise ValueError(f"goal_share must be in [0, 1], got {goal_share!r}")
     n_goals = int(round(goal_share * n_images))
     k_place, k_goal = jax.random.split(key) if n_goals else (key, None)
-    parts = []
+    parts, partners = [], []
     if n_goals:
-        parts.append(np.asarray(_goal_images_fn(env)(jax.random.split(k_goal, n_goals))))
+        goals = np.asarray(_goal_images_fn(env)(jax.random.split(k_goal, n_goals)))
+        parts.append(goals)
+        partners.append(goals)
     if n_images > n_goals:
-        parts.append(pipeline.random_object_states(env, k_place, n_images - n_goals,
-                                                   settle_steps=0)[0])
+        placed = pipeline.random_object_states(env, k_place, n_images - n_goals,
+                                               settle_steps=0, arm_pairs=arm_pairs)
+        parts.append(placed[0])
+        partners.append(placed[2] if arm_pairs else None)
+    segment = jax.jit(pipeline.segment)
     rgb = np.concatenate(parts)
-    masks = jax.jit(pipeline.segment)(seg_params, rgb)
-    return pipeline.segmented_image(rgb, masks), masks
+    masks = segment(seg_params, rgb)
+    out = (pipeline.segmented_image(rgb, masks), masks)
+    if not arm_pairs:
+        return out
+    rgb_b = np.concatenate(partners)
+    masks_b = segment(seg_params, rgb_b)
+    return out + (pipeline.segmented_image(rgb_b, masks_b), masks_b)
 
 
 def occlude_share(key, images, masks, fraction: float, drop: float):
@@ -116,7 +129,7 @@ def occlude_share(key, images, masks, fraction: float, drop: float):
     return jnp.where(dropped[..., None], jnp.zeros_like(images), images), masks & ~dropped
 
 
-def _fit_vae(key, cfg, data, masks, desc, progress: bool):
+def _fit_vae(key, cfg, data, masks, desc, progress: bool, partners=None):
     from tqdm import tqdm
 
     state = encoders.init_vae(key, cfg)
@@ -124,7 +137,7 @@ def _fit_vae(key, cfg, data, masks, desc, progress: bool):
     losses = []
     bar = tqdm(range(cfg.epochs), desc=desc, unit="epoch", disable=not progress)
     for e in bar:
-        state, m = epoch(state, jax.random.fold_in(key, e + 1), data, cfg, masks)
+        state, m = epoch(state, jax.random.fold_in(key, e + 1), data, cfg, masks, partners)
         losses.append(float(m["loss"].mean()))
         if not np.isfinite(losses[-1]):
             raise FloatingPointError(f"{desc}: loss is {losses[-1]} at epoch {e}")
@@ -228,31 +241,37 @@ def pretrain(cfg: TrainConfig, env, seg_params, key, progress: bool = True,
                                                    ocfg.pretrain_occluded_drop]}
         if ocfg.pretrain_goal_share:  # absent at 0: earlier caches of placements stay valid
             od_spec["goal_share"] = ocfg.pretrain_goal_share
+        arm_pairs = ocfg.arm_pair_coef > 0
+        if arm_pairs:  # likewise
+            od_spec["arm_pairs"] = True
 
         def build_object_data():
-            images, masks = object_dataset(env, seg_params, k_od, n_obj,
-                                           ocfg.pretrain_goal_share)
-            if ocfg.pretrain_occluded_fraction > 0:
-                images, masks = occlude_share(jax.random.fold_in(k_od, 1), images, masks,
-                                              ocfg.pretrain_occluded_fraction,
-                                              ocfg.pretrain_occluded_drop)
-            return (images, masks), None
+            arrays = object_dataset(env, seg_params, k_od, n_obj, ocfg.pretrain_goal_share,
+                                    arm_pairs)
+            if ocfg.pretrain_occluded_fraction > 0:  # on each rendering, independently
+                arrays = sum((occlude_share(jax.random.fold_in(k_od, 1 + i // 2),
+                                            *arrays[i:i + 2], ocfg.pretrain_occluded_fraction,
+                                            ocfg.pretrain_occluded_drop)
+                              for i in range(0, len(arrays), 2)), ())
+            return arrays, None
 
         def object_data():
             if "object" not in data:
                 shape = (n_obj,) + ocfg.image_shape
-                (data["object"], data["masks"]), _ = _cached(
-                    cache, "object_data", od_spec,
-                    build_object_data,
-                    lambda: (jax.ShapeDtypeStruct(shape, jax.numpy.uint8),
-                             jax.ShapeDtypeStruct(shape[:-1], jax.numpy.bool_)))
+                like = (jax.ShapeDtypeStruct(shape, jax.numpy.uint8),
+                        jax.ShapeDtypeStruct(shape[:-1], jax.numpy.bool_))
+                arrays, _ = _cached(cache, "object_data", od_spec, build_object_data,
+                                    lambda: like * (2 if arm_pairs else 1))
+                data["object"], data["masks"] = arrays[:2]
+                data["partners"] = arrays[2] if arm_pairs else None
                 info["object_data"] = data["object"]
             return data["object"]
 
         obj_spec = {"data": od_spec, "cfg": dataclasses.asdict(ocfg), "key": _key(k_o)}
         obj_state, info["object_loss"] = _cached(
             cache, "object_vae", obj_spec,
-            lambda: _fit_vae(k_o, ocfg, object_data(), data["masks"], "object-VAE", progress),
+            lambda: _fit_vae(k_o, ocfg, object_data(), data["masks"], "object-VAE", progress,
+                             data["partners"]),
             lambda: jax.eval_shape(lambda: encoders.init_vae(k_o, ocfg)))
         frame_params, frame_cfg, frame_spec, frame_data = (obj_state.params, ocfg, obj_spec,
                                                            object_data)

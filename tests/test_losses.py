@@ -75,6 +75,29 @@ def test_vae_train_step_loss_is_the_reference_objective():
     assert float(metrics["matching"]) > 0.0  # the matching term took part
 
 
+def test_arm_pair_term_is_the_partner_codes_distance():
+    """vae_loss with partner images adds pair_coef x the batch mean of the squared distance
+    between the images' and the partners' encoder means, and nothing else."""
+    b = 4
+    cfg = object_vae_config("puck_push", batch_size=b)
+    state = encoders.init_vae(jax.random.key(3), cfg)
+    model = encoders.vae_model(cfg)
+    images, partners = disc_images(b, radius=8.0), disc_images(b, radius=5.0)
+    noise = jax.random.normal(jax.random.key(1), (b, cfg.latent_dim))
+    base, m0 = losses.vae_loss(state.params, model, images, noise, 0.5)
+    with_pair, m1 = losses.vae_loss(state.params, model, images, noise, 0.5, partners=partners,
+                                    pair_coef=7.0)
+    mu = np.asarray(model.apply(state.params, images, method=type(model).encode)[0], np.float64)
+    mu_p = np.asarray(model.apply(state.params, partners, method=type(model).encode)[0],
+                      np.float64)
+    pair = np.mean(np.sum((mu - mu_p) ** 2, -1))
+    assert pair > 0 and "pair" not in m0
+    np.testing.assert_allclose(float(m1["pair"]), pair, rtol=1e-5)
+    np.testing.assert_allclose(float(with_pair), float(base) + 7.0 * pair, rtol=1e-5)
+    with pytest.raises(ValueError, match="partners"):
+        losses.vae_loss(state.params, model, images, noise, 0.5, partners=partners[..., 0])
+
+
 def test_gradient_in_parts_equals_the_whole_batch_gradient():
     """`grad_parts` slices give the whole batch's loss, metrics and gradient (float32
     roundoff), with the matching loss on; a batch that does not split is refused."""

@@ -122,6 +122,17 @@ def test_image_checks():
     with pytest.raises(ValueError, match="object_masks"):
         encoders.vae_train_step(state, jax.random.key(0), jnp.zeros((2, 48, 48, 3), jnp.uint8),
                                 cfg, object_masks=jnp.zeros((2, 48, 48, 3), bool))
+    # Arm-pair partners come with arm_pair_coef > 0, in the images' shape.
+    images = jnp.zeros((2, 48, 48, 3), jnp.uint8)
+    with pytest.raises(ValueError, match="partner images go with arm_pair_coef > 0"):
+        encoders.vae_train_step(state, jax.random.key(0), images, cfg, partners=images)
+    paired = dataclasses.replace(cfg, arm_pair_coef=1.0)
+    with pytest.raises(ValueError, match="partner images go with arm_pair_coef > 0"):
+        encoders.vae_train_step(state, jax.random.key(0), images, paired)
+    with pytest.raises(ValueError, match=r"partners must have the images' shape \(2, 48, 48, 3\)"):
+        encoders.vae_train_step(state, jax.random.key(0), images, paired, partners=images[:1])
+    with pytest.raises(ValueError, match="arm_pair_coef must be >= 0, got -1.0"):
+        object_vae_config("pickup", arm_pair_coef=-1.0)
 
 
 # --- LSTM ---------------------------------------------------------------------------------------

@@ -16,12 +16,13 @@ from configs.train import make_config
 from roll_jax import pretrain
 
 
-def tiny(**flags):
+def tiny(arm_pair_coef=0.0, **flags):
     base = make_config("puck_push", "roll", "smoke", **flags)
     small = {"epochs": 1, "batches_per_epoch": 2, "batch_size": 4, "n_pretrain_images": 12}
     return make_config("puck_push", "roll", "smoke", **flags,
                        scene_vae=dataclasses.replace(base.scene, **small),
-                       object_vae=dataclasses.replace(base.object_vae, **small),
+                       object_vae=dataclasses.replace(base.object_vae, **small,
+                                                      arm_pair_coef=arm_pair_coef),
                        lstm=dataclasses.replace(base.lstm, epochs=1, batches_per_epoch=1,
                                                 batch_size=2))
 
@@ -35,10 +36,14 @@ def built(monkeypatch):
         counts["scene_data"] += 1
         return jax.random.randint(key, (n, 48, 48, 3), 0, 256).astype(jnp.uint8)
 
-    def object_dataset(env, seg, key, n, goal_share=0.0):
+    def object_dataset(env, seg, key, n, goal_share=0.0, arm_pairs=False):
         counts["object_data"] += 1
-        masks = jax.random.bernoulli(key, 0.1, (n, 48, 48))
-        return jnp.where(masks[..., None], jnp.full((n, 48, 48, 3), 200, jnp.uint8), 0), masks
+        out = ()
+        for k in [key, jax.random.fold_in(key, 1)][:1 + arm_pairs]:  # images (and partners)
+            masks = jax.random.bernoulli(k, 0.1, (n, 48, 48))
+            out += (jnp.where(masks[..., None], jnp.full((n, 48, 48, 3), 200, jnp.uint8), 0),
+                    masks)
+        return out
 
     fit_vae, fit_lstm = pretrain._fit_vae, pretrain._fit_lstm
 
@@ -81,6 +86,18 @@ def test_cache_shares_what_matches_and_rebuilds_the_rest(built, tmp_path):
     assert built["object_data"] == 2 and built["scene_data"] == 1
     fresh, _ = pretrain.pretrain(tiny(), None, seg, key, progress=False)
     assert built["scene_data"] == 2 and _equal(fresh, first)
+    # The arm-pair loss: object data with partners and an object-VAE trained on them, built
+    # once; the second run loads both (partners included), bit-identical.
+    before = dict(built)
+    paired, _ = pretrain.pretrain(tiny(arm_pair_coef=1.0), None, seg, key, progress=False,
+                                  cache=cache)
+    grew = {k: built[k] - before[k] for k in built}
+    assert grew == {"scene_data": 0, "object_data": 1, "vae": 1, "lstm": 1}
+    assert _equal(paired.scene_vae, first.scene_vae)
+    assert not _equal(paired.object_vae.params, first.object_vae.params)
+    again, _ = pretrain.pretrain(tiny(arm_pair_coef=1.0), None, seg, key, progress=False,
+                                 cache=cache)
+    assert built == {k: before[k] + grew[k] for k in built} and _equal(again, paired)
 
 
 def test_scene_data_from_goals_are_rendered_goal_states():
@@ -118,6 +135,23 @@ def test_object_data_holds_the_configured_share_of_goal_states():
     np.testing.assert_array_equal(images[2:], placed)
     only_placed, _ = pretrain.object_dataset(env, seg, k_place, 2)
     np.testing.assert_array_equal(only_placed, placed)  # share 0: placements from the key
+
+    # Arm pairs: the same images and masks, and partners that show each placement's object
+    # state with the hand elsewhere (a goal image is its own partner).
+    a, ma, b, mb = pretrain.object_dataset(env, seg, key, 4, goal_share=0.5, arm_pairs=True)
+    np.testing.assert_array_equal(a, images)
+    np.testing.assert_array_equal(ma, masks)
+    np.testing.assert_array_equal(b[:2], goals)
+    rgb, lab, rgb_b, lab_b = pipeline.random_object_states(env, k_place, 2, settle_steps=0,
+                                                           arm_pairs=True)
+    np.testing.assert_array_equal(rgb, placed)
+    np.testing.assert_array_equal(b[2:], rgb_b)
+    assert bool(mb.all())
+    # The same object: its pixels agree wherever neither arm covers them; the arm moved.
+    obj, obj_b, arm, arm_b = lab == 2, lab_b == 2, lab == 1, lab_b == 1
+    assert obj.any(axis=(1, 2)).all()
+    np.testing.assert_array_equal(obj & ~arm_b, obj_b & ~arm)
+    assert all(not np.array_equal(arm[i], arm_b[i]) for i in range(2))
     with pytest.raises(ValueError, match="pretrain_goal_share must be in \\[0, 1\\], got 1.2"):
         object_vae_config("pickup", pretrain_goal_share=1.2)
 

@@ -191,8 +191,8 @@ def segmented_image(rgb, mask):
 # ----------------------------------------------------------------------------- evaluation
 
 @functools.lru_cache(maxsize=None)
-def _object_states_fn(env, settle_steps: int):
-    """jit(vmap) of one random object state, built once per env and settle_steps: a fresh
+def _object_states_fn(env, settle_steps: int, arm_pairs: bool = False):
+    """jit(vmap) of one random object state, built once per env and settings: a fresh
     closure per call would trace and compile the MJX rollout and the renderer again."""
     from envs_mjx.rollout import random_actions, rollout
 
@@ -201,24 +201,30 @@ def _object_states_fn(env, settle_steps: int):
         state = env.random_placement(k_h, k_o)
         if settle_steps:  # (0: kinematics only, no MJX step in the compiled program)
             state, _ = rollout(env, state, random_actions(k_a, settle_steps, env.action_size))
-        return env.render_both(state)
+        if not arm_pairs:
+            return env.render_both(state)
+        # The same object state with the hand at another random place (kinematic placement).
+        other = env.place(env.random_hand(jax.random.fold_in(k, 1)), env.object_state(state))
+        return (*env.render_both(state), *env.render_both(other))
 
     return jax.jit(jax.vmap(one))
 
 
-def random_object_states(env, key, n: int, settle_steps: int = 5, chunk: int = 32):
+def random_object_states(env, key, n: int, settle_steps: int = 5, chunk: int = 32,
+                         arm_pairs: bool = False):
     """States with the hand and the object uniform in their boxes (object in its goal space),
     after a few random steps so the scene settles; returns numpy (rgb, labels) [n, H, W, ...].
-    State i depends only on `key` and i (not on `chunk`)."""
+    `arm_pairs`: (rgb, labels, rgb_b, labels_b), the second pair the same object states
+    rendered with the hand at another random place. State i depends only on `key` and i (not
+    on `chunk`), and its first rendering not on `arm_pairs`."""
     # Fixed chunks of `chunk` states, one compile: a single vmap over ~750 pickup states sat
     # asleep on a futex for hours on CPU (twice), while chunks of 16-32 run in < 1 s each.
     keys = jax.random.split(key, n)
     pad = -n % chunk
     keys = jnp.take(keys, jnp.arange(n + pad) % n, axis=0)  # whole chunks, n < chunk too
-    run = _object_states_fn(env, settle_steps)
+    run = _object_states_fn(env, settle_steps, arm_pairs)
     outs = [jax.device_get(run(keys[i:i + chunk])) for i in range(0, n + pad, chunk)]
-    rgb, labels = (np.concatenate(parts)[:n] for parts in zip(*outs))
-    return rgb, labels
+    return tuple(np.concatenate(parts)[:n] for parts in zip(*outs))
 
 
 def mask_scores(pred, labels):
