@@ -106,7 +106,8 @@ def object_dataset(env, seg_params, key, n_images: int, goal_share: float = 0.0,
         placed = pipeline.random_object_states(env, k_place, n_images - n_goals,
                                                settle_steps=0, arm_pairs=arm_pairs)
         parts.append(placed[0])
-        partners.append(placed[2] if arm_pairs else None)
+        if arm_pairs:
+            partners.append(placed[2])
     segment = jax.jit(pipeline.segment)
     rgb = np.concatenate(parts)
     masks = segment(seg_params, rgb)
