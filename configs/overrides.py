@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import ast
 import dataclasses
+import difflib
 
 # Annotation (a string under `from __future__ import annotations`) -> accepted value types.
 _SCALARS = {"int": (int,), "float": (int, float), "bool": (bool,), "str": (str,)}
@@ -70,17 +71,35 @@ def _fits(annotation: str, value) -> bool | None:
     return None if unchecked else False
 
 
+def unknown(name: str, known, what: str, prefix: str = "") -> str:
+    """"unknown WHAT" with the nearest of `known` to `name` (difflib) and all of them."""
+    known = list(known)
+    near = difflib.get_close_matches(name, known, n=1)
+    hint = f"; did you mean {prefix}{near[0]}?" if near else "."
+    return f"unknown {what}{hint} Valid: {', '.join(known)}"
+
+
 def check_field(cls, name: str, value, label: str | None = None) -> None:
-    """ValueError naming `--set LABEL=VALUE` (LABEL defaults to `name`) when `name` is not a
-    field of the config dataclass `cls` or `value` is not of its annotated type."""
+    """ValueError naming `--set LABEL` (LABEL defaults to `name`; "sac.batch_size" for a
+    nested field) when `name` is not a field of the config dataclass `cls` (with the nearest
+    field and all of them) or `value` is not of its annotated type (naming the field, the
+    value and the type)."""
     fields = {f.name: f.type for f in dataclasses.fields(cls)}
     label = name if label is None else label
     if name not in fields:
-        raise ValueError(f"--set {label}: unknown field; {cls.__name__} has {', '.join(fields)}")
+        what = f"field of {cls.__name__}"
+        raise ValueError(f"--set {label}: {unknown(name, fields, what, label[:-len(name)])}")
     t = fields[name]
     annotation = t if isinstance(t, str) else getattr(t, "__name__", str(t))
+    if annotation.removesuffix(" | None").endswith("Config"):
+        raise ValueError(f"--set {label}={value!r}: {label} is a group of fields "
+                         f"({annotation}); set one of them: --set {label}.FIELD=VALUE")
     if _fits(annotation, value) is False:
-        raise ValueError(f"--set {label}={value!r}: expected a {annotation}")
+        hint = " (Python literals: True, False)" if (
+            isinstance(value, str) and value.lower() in ("true", "false")) else ""
+        got = "None" if value is None else type(value).__name__
+        raise ValueError(f"--set {label}: {cls.__name__}.{name} takes {annotation}, got "
+                         f"{value!r} ({got}){hint}")
 
 
 def field_overrides(cls, items) -> dict:

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import concurrent.futures
 import contextlib
-import dataclasses
 import functools
 import json
 import os
@@ -23,8 +22,7 @@ import time
 import jax
 import numpy as np
 
-from configs.overrides import parse_overrides
-from configs.train import TrainConfig
+from configs.train import TrainConfig, build_config  # noqa: F401 (the commands' config)
 from roll_jax import loop, pretrain, plots, run_dir
 from roll_jax import sharding as shd
 from roll_jax.checkpoint import restore_train_state, save_train_state, train_state_manager
@@ -76,38 +74,6 @@ class PhaseTimes:
 
     def as_dict(self) -> dict:
         return {"wall_s": self.wall, "cpu_s": self.cpu}
-
-
-def build_config(task: str, algo: str, preset: str, seeds: int = 1, overrides=(),
-                 matching_loss: bool = True, use_lstm: bool = True,
-                 use_object_vae: bool = True) -> TrainConfig:
-    """The config train.py and the reproduction grid run: `make_config` with `--set` style
-    overrides (strings) and the ablation flags; ValueError on anything unknown or
-    contradictory (nothing is compiled)."""
-    from configs.overrides import check_field
-    from configs.train import make_config
-
-    over = parse_overrides(overrides)
-    top = dict(over.pop("", {}))
-    unknown = set(top) - {f.name for f in dataclasses.fields(TrainConfig)}
-    if unknown:
-        raise ValueError(f"--set: unknown config field(s) {sorted(unknown)}")
-    for name, value in top.items():
-        check_field(TrainConfig, name, value)
-    top.update(seeds=seeds, matching_loss=matching_loss, use_lstm=use_lstm,
-               use_object_vae=use_object_vae)
-    base = make_config(task, algo, preset)
-    for group, fields in over.items():
-        sub = getattr(base, group, None)
-        if not dataclasses.is_dataclass(sub):
-            raise ValueError(f"--set {group}.*: unknown config group {group!r}")
-        unknown = set(fields) - {f.name for f in dataclasses.fields(sub)}
-        if unknown:
-            raise ValueError(f"--set: unknown field(s) {sorted(unknown)} in {group}")
-        for name, value in fields.items():
-            check_field(type(sub), name, value, f"{group}.{name}")
-        top[group] = dataclasses.replace(sub, **fields)
-    return make_config(task, algo, preset, **top)
 
 
 def check_resume(out: str, cfg: TrainConfig, seed: int | None = None) -> None:

@@ -63,7 +63,7 @@ def _args(out, *extra):
     (["--report-only", "--dry-run"], "--report-only and --dry-run contradict"),
     (["--seeds", "0"], "--seeds must be >= 1"),
     (["--set", "sac.replay_size=10"], "replay_size=10 is smaller than one chunk"),
-    (["--set", "nonsense=1"], "unknown config field"),
+    (["--set", "nonsense=1"], "--set nonsense: unknown field of TrainConfig"),
     (["--devices", "0"], "'all' or a positive integer"),
 ])
 def test_rejects_before_running(tmp_path, capsys, extra, msg):
