@@ -4,9 +4,6 @@ import os
 os.environ.setdefault("JAX_PLATFORMS", "cpu")
 os.environ.setdefault("MUJOCO_GL", "disable")
 
-import importlib.util  # noqa: E402
-import sys  # noqa: E402
-
 from roll_jax import compile_cache  # noqa: E402  (no jax import at module level)
 
 # XLA:CPU options that cut the suite's compiles without slowing what it runs: the older
@@ -56,11 +53,8 @@ def pytest_collection_modifyitems(config, items):
 
 
 @pytest.fixture
-def train_cli(monkeypatch):
-    """The top-level train.py (the command line) loaded as a module."""
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    spec = importlib.util.spec_from_file_location("train_cli", os.path.join(root, "train.py"))
-    mod = importlib.util.module_from_spec(spec)
-    monkeypatch.setitem(sys.modules, "train_cli", mod)
-    spec.loader.exec_module(mod)
-    return mod
+def train_cli():
+    """The training command (train.py, roll-train): roll_jax/train_cli.py."""
+    from roll_jax import train_cli
+
+    return train_cli

@@ -274,13 +274,9 @@ def test_resolve_single_process():
             sharding.parse_devices(bad)
 
 
-def test_cli_checks_devices_before_compiling(tmp_path, capsys, monkeypatch):
-    import importlib.util
+def test_cli_checks_devices_before_compiling(tmp_path, capsys):
+    from roll_jax import train_cli as cli
 
-    spec = importlib.util.spec_from_file_location("train_cli", os.path.join(ROOT, "train.py"))
-    cli = importlib.util.module_from_spec(spec)
-    monkeypatch.setitem(sys.modules, "train_cli", cli)
-    spec.loader.exec_module(cli)
     out = str(tmp_path / "run")
     with pytest.raises(SystemExit):
         cli.parse_args(["--seeds", "3", "--devices", "2", "--out", out])
