@@ -37,7 +37,7 @@ def difference(a: np.ndarray, b: np.ndarray) -> dict:
 
 
 def main(argv=None) -> dict:
-    from roll_jax import evaluate
+    from roll_jax import evaluation
 
     p = argparse.ArgumentParser(description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -53,8 +53,8 @@ def main(argv=None) -> dict:
         pairs.append(tuple(pair.split(":")))
     finals, runs = {}, {}
     for run in dict.fromkeys(r for pair in pairs for r in pair):
-        loaded = evaluate.load_run(run)
-        dist = 100 * evaluate.evaluate(loaded, None, a.n_goals, a.seed)["final_distance"]
+        loaded = evaluation.load_run(run)
+        dist = 100 * evaluation.evaluate(loaded, None, a.n_goals, a.seed)["final_distance"]
         finals[run] = dist
         runs[run] = {"task": loaded.cfg.task, "env_steps": loaded.epoch * loaded.cfg.epoch_env_steps,
                      "median_cm": float(np.median(dist)), "mean_cm": float(dist.mean()),

@@ -41,7 +41,7 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 from bench.common import machine_info, write_results  # noqa: E402
-from roll_jax import evaluate, loop, pretrain, sac  # noqa: E402
+from roll_jax import evaluation, loop, pretrain, sac  # noqa: E402
 from roll_jax.analysis import spearman  # noqa: E402
 from roll_jax.checkpoint import read_meta  # noqa: E402
 from roll_jax.goal_encoding import goal_encoder  # noqa: E402
@@ -54,7 +54,7 @@ def rollouts(loaded, n_goals: int, seed: int):
     cfg, env = loaded.cfg, loaded.env
     enc = goal_encoder(cfg)
     k_goal, k_run = jax.random.split(jax.random.PRNGKey(seed))
-    goal_states, goal_rgb = evaluate.sample_goals(env, k_goal, n_goals)
+    goal_states, goal_rgb = evaluation.sample_goals(env, k_goal, n_goals)
 
     def one_seed(frozen, state, key):
         goals = enc.encode_goal_images(frozen, state.scene_vae.params, state.lstm.params, goal_rgb)
@@ -162,7 +162,7 @@ def main(argv=None) -> dict:
     p.add_argument("--near", type=float, default=3.0, help="cm")
     p.add_argument("--out", default=None)
     a = p.parse_args(argv)
-    loaded = evaluate.load_run(a.run)
+    loaded = evaluation.load_run(a.run)
     if loaded.cfg.algo != "roll" or not loaded.cfg.use_lstm:
         raise SystemExit(f"{a.run}: a ROLL run with its LSTM is needed, got algo "
                          f"{loaded.cfg.algo!r} (use_lstm={loaded.cfg.use_lstm})")
@@ -176,13 +176,13 @@ def main(argv=None) -> dict:
            "final_distance_cm_median": float(np.median(
                100 * np.linalg.norm(obj[:, :, -1] - goal_obj[None], axis=-1))),
            "machine": machine_info(), "encoders": {}}
-    sources = [(a.run, evaluate.input_paths(a.run)["enc_ckpt"], loaded.state.lstm.params)]
+    sources = [(a.run, evaluation.input_paths(a.run)["enc_ckpt"], loaded.state.lstm.params)]
     for d in a.enc:
         if os.path.exists(os.path.join(d, "config.json")):
-            other = evaluate.load_run(d)
+            other = evaluation.load_run(d)
             if other.cfg.seeds != loaded.cfg.seeds:
                 raise SystemExit(f"{d}: {other.cfg.seeds} seeds, {a.run} has {loaded.cfg.seeds}")
-            sources.append((d, evaluate.input_paths(d)["enc_ckpt"], other.state.lstm.params))
+            sources.append((d, evaluation.input_paths(d)["enc_ckpt"], other.state.lstm.params))
         else:  # a `roll_jax.pretrain --out` directory holds its checkpoint in encoders/
             sub = os.path.join(d, "encoders")
             sources.append((d, sub if os.path.exists(os.path.join(sub, "meta.json")) else d, None))

@@ -1,7 +1,7 @@
 """Evaluate a training run's policy on goal images, as at the paper's test time.
 
     python -m roll_jax.evaluate --run DIR [--goal-image PNG ...] [--n-goals N] [--seed S]
-        --out OUT
+        --out OUT                  (roll-evaluate ... once installed)
 
 Loads the run's latest checkpoint (finished or not: DIR/ckpt, read only) with its
 segmentation and encoders, takes the goal images (PNG or any image PIL reads, RGB; resized to
@@ -24,251 +24,43 @@ distances twice. Nothing in DIR is written.
 from __future__ import annotations
 
 import argparse
-import dataclasses
-import functools
 import json
 import os
 import sys
 
-import jax
-import jax.numpy as jnp
-import numpy as np
 
-from configs.train import TrainConfig
-from roll_jax import loop, pretrain, run_dir, sac
-from roll_jax.checkpoint import restore_train_state, train_state_manager
-from roll_jax.goal_encoding import Frozen, GoalEncoder, goal_encoder
-from roll_jax.segmentation import pipeline
-
-IMAGE_SIZE = 48
-
-
-@dataclasses.dataclass
-class LoadedRun:
-    cfg: TrainConfig
-    env: object
-    frozen: Frozen
-    state: loop.TrainState  # [seeds]-batched
-    epoch: int
-
-
-def input_paths(run: str) -> dict:
-    """Where the run's segmentation and encoders are: DIR/inputs.json (written by the run:
-    its --seg-ckpt / --enc-ckpt, or its own sub-directories)."""
-    inputs = run_dir.read_inputs(run)
-    return {"seg_ckpt": inputs.get("seg_ckpt", os.path.join(run, "segmentation")),
-            "enc_ckpt": inputs.get("enc_ckpt", os.path.join(run, "encoders"))}
-
-
-def load_run(run: str, seg_ckpt: str | None = None, enc_ckpt: str | None = None) -> LoadedRun:
-    """The run's config, env, frozen parameters and its latest train state; clear errors for a
-    directory that is not a run or has no checkpoint; the segmentation and encoder loaders
-    refuse checkpoints of another task, naming them."""
-    import envs_mjx
-
-    cfg = run_dir.read_config(run)
-    ckpt = os.path.join(run, "ckpt")
-    mgr = train_state_manager(run, cfg.keep_checkpoints, create=False) if os.path.isdir(ckpt) \
-        else None
-    if mgr is None or mgr.latest_step() is None:
-        raise FileNotFoundError(f"{run}: no checkpoint in {ckpt} (the run has not finished "
-                                f"its first evaluation interval)")
-    env = envs_mjx.make(cfg.task)
-    enc = goal_encoder(cfg)
-    inputs = input_paths(run)
-    seg = None
-    if enc.segment:
-        seg, _ = pipeline.load(seg_ckpt or inputs["seg_ckpt"], cfg.task, cfg.scene.image_shape)
-    if enc.oracle:
-        pre = pretrain.initial(cfg, jax.random.PRNGKey(0))
-    else:
-        pre = pretrain.load(enc_ckpt or inputs["enc_ckpt"], cfg)
-    from roll_jax import train
-
-    keys = jax.random.split(jax.random.PRNGKey(0), cfg.seeds)
-    abstract = jax.eval_shape(lambda k: train.init_states(cfg, env, k, pre), keys)
-    epoch, state = restore_train_state(mgr, abstract)
-    mgr.close()
-    frozen = Frozen(seg=seg, object_vae=None if pre.object_vae is None else pre.object_vae.params)
-    return LoadedRun(cfg=cfg, env=env, frozen=frozen, state=state, epoch=int(epoch))
-
-
-def read_goal_image(path: str) -> tuple[np.ndarray, str | None]:
-    """uint8 [48, 48, 3] of an RGB image file, and a note when it was resized."""
-    from PIL import Image, UnidentifiedImageError
-
-    try:
-        img = Image.open(path)
-        img.load()
-    except (OSError, UnidentifiedImageError) as e:
-        raise ValueError(f"goal image {path}: not an image ({e})") from None
-    bands = img.getbands()
-    if len(bands) != 3:
-        raise ValueError(f"goal image {path}: {len(bands)} channel(s) (mode {img.mode}); "
-                         f"expected an RGB image with 3")
-    img = img.convert("RGB")
-    note = None
-    if img.size != (IMAGE_SIZE, IMAGE_SIZE):
-        note = f"resized from {img.size[0]}x{img.size[1]} to {IMAGE_SIZE}x{IMAGE_SIZE}"
-        img = img.resize((IMAGE_SIZE, IMAGE_SIZE), Image.BILINEAR)
-    return np.asarray(img, np.uint8), note
-
-
-def _goal_latents(enc: GoalEncoder, env, frozen, state, rgb, goal_states):
-    if enc.oracle:
-        return jax.vmap(lambda st: loop.oracle_goal(env, st))(goal_states)
-    lstm_params = None if state.lstm is None else state.lstm.params
-    return enc.encode_goal_images(frozen, state.scene_vae.params, lstm_params, rgb)
-
-
-@functools.lru_cache(maxsize=4)
-def make_rollout(cfg: TrainConfig):
-    """jit(vmap over seeds) of one deterministic episode per goal -> per seed: final env
-    states [G], frames [G, T+1, 48, 48, 3], goal latents [G, g], final achieved latents
-    [G, g]. Goals come as images (`goal_rgb`) and, for the oracle, as env states. Cached per
-    config (its own env), so that every run loaded with one config runs one program."""
-    import envs_mjx
-
-    env = envs_mjx.make(cfg.task)
-    enc = goal_encoder(cfg)
-
-    def one_seed(frozen, state, goal_rgb, goal_states, key):
-        g = goal_rgb.shape[0]
-        goals = _goal_latents(enc, env, frozen, state, goal_rgb, goal_states)
-        k_start, k_ep = jax.random.split(key)
-        starts = jax.vmap(env.reset)(jax.random.split(k_start, g))
-        es = jax.vmap(env.reset_episode)(starts, jax.random.split(k_ep, g))
-
-        def observe(es):
-            if enc.oracle:
-                return jax.vmap(lambda st: loop.oracle_obs(env, st))(es), jax.vmap(env.render)(es)
-            rgb = jax.vmap(env.render)(es)
-            return loop.scene_latents(cfg, state.scene_vae.params, rgb), rgb
-
-        def step(es, _):
-            z, rgb = observe(es)
-            a = sac.select_action(state.sac.policy_params, z, goals, None, deterministic=True,
-                                  cfg=cfg.sac)
-            return jax.vmap(env.step)(es, a), rgb
-
-        es, frames = jax.lax.scan(step, es, None, length=cfg.horizon)
-        _, last = observe(es)
-        frames = jnp.concatenate([frames, last[None]], 0).swapaxes(0, 1)  # [G, T+1, ...]
-        if enc.oracle:
-            achieved = jax.vmap(lambda st: loop.oracle_goal(env, st))(es)
-        else:
-            lstm_params = None if state.lstm is None else state.lstm.params
-            lat = enc.frame_latents(frozen, state.scene_vae.params,
-                                    enc.goal_images(frozen, frames))
-            achieved = jax.vmap(lambda f: enc.sequence(lstm_params, f))(lat)[:, -1]
-        return es, frames, goals, achieved
-
-    return jax.jit(jax.vmap(one_seed, in_axes=(None, 0, None, None, None)))
-
-
-@functools.partial(jax.jit, static_argnums=(0, 2))
-def sample_goals(env, key, n: int):
-    """n goal states from the task's goal space and their rendered 48x48 images."""
-    states = jax.vmap(env.sample_goal)(jax.random.split(key, n))
-    return states, jax.vmap(env.render)(states)
-
-
-@functools.partial(jax.jit, static_argnums=(0, 2))
-def _reset_states(env, key, n: int):
-    """n copies of one reset state: the goal-state slot of goals given only as images."""
-    return jax.tree.map(lambda x: jnp.broadcast_to(x, (n,) + x.shape), env.reset(key))
-
-
-@functools.partial(jax.jit, static_argnums=0)
-def _final_states(env, es, goal_states):
-    """Final object states [S, G, k] and true distances to the goal states [S, G]."""
-    per_seed = jax.vmap(jax.vmap(env.object_state))(es)
-    dist = jax.vmap(lambda e: jax.vmap(env.goal_distance)(e, goal_states))(es)
-    return per_seed, dist
-
-
-def evaluate(loaded: LoadedRun, goal_images: list[np.ndarray] | None, n_goals: int,
-             seed: int = 0) -> dict:
-    """Arrays of the evaluation: goal images [G, ...], frames [S, G, T+1, ...], latent and
-    (sampled goals only) true final distances [S, G], final object states [S, G, k]."""
-    cfg, env = loaded.cfg, loaded.env
-    k_goal, k_run = jax.random.split(jax.random.PRNGKey(seed))
-    if goal_images:
-        if goal_encoder(cfg).oracle:
-            raise ValueError("an oracle run acts on true goal states: goal images cannot be "
-                             "evaluated (omit --goal-image to sample goals)")
-        rgb = jnp.asarray(np.stack(goal_images), jnp.uint8)
-        # no goal state behind a user's image: a reset state fills the (unused) slot
-        goal_states = _reset_states(env, k_goal, rgb.shape[0])
-        true_goal = False
-    else:
-        goal_states, rgb = sample_goals(env, k_goal, n_goals)
-        true_goal = True
-    es, frames, goals, achieved = make_rollout(cfg)(loaded.frozen, loaded.state, rgb,
-                                                    goal_states, k_run)
-    final_object, final_distance = _final_states(env, es, goal_states)
-    out = {"goal_images": np.asarray(rgb), "frames": np.asarray(frames),
-           "latent_distance": np.asarray(jnp.linalg.norm(achieved - goals, axis=-1)),
-           "final_object_state": np.asarray(final_object)}
-    if true_goal:
-        out["final_distance"] = np.asarray(final_distance)
-    return out
-
-
-def write_outputs(out: str, loaded: LoadedRun, res: dict, sources: list[str],
-                  notes: list[str | None], run: str, seed: int) -> dict:
-    from PIL import Image
-
-    os.makedirs(out, exist_ok=True)
-    goals = []
-    n_seeds = res["frames"].shape[0]
-    for g, (src, note) in enumerate(zip(sources, notes)):
-        Image.fromarray(res["goal_images"][g]).save(os.path.join(out, f"goal_{g:02d}.png"))
-        for s in range(n_seeds):
-            run_dir.write_gif(os.path.join(out, f"goal_{g:02d}_seed{s}.gif"), res["frames"][s, g],
-                              res["goal_images"][g])
-            Image.fromarray(res["frames"][s, g, -1]).save(
-                os.path.join(out, f"final_{g:02d}_seed{s}.png"))
-        row = {"goal": g, "source": src, "note": note,
-               "latent_distance": res["latent_distance"][:, g].tolist(),
-               "final_object_state": res["final_object_state"][:, g].tolist(),
-               "final_distance": (res["final_distance"][:, g].tolist()
-                                  if "final_distance" in res else None)}
-        goals.append(row)
-    summary = {"run": os.path.abspath(run), "task": loaded.cfg.task, "algo": loaded.cfg.algo,
-               "checkpoint_epoch": loaded.epoch,
-               "env_steps": loaded.epoch * loaded.cfg.epoch_env_steps, "seeds": n_seeds,
-               "seed": seed, "goals": goals,
-               "latent_distance_median": float(np.median(res["latent_distance"]))}
-    if "final_distance" in res:
-        summary["final_distance_median"] = float(np.median(res["final_distance"]))
-        summary["final_distance_mean"] = float(np.mean(res["final_distance"]))
-    with open(os.path.join(out, "evaluation.json"), "w") as f:
-        json.dump(summary, f, indent=2)
-    return summary
-
-
-def main(argv=None) -> dict:
+def make_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m roll_jax.evaluate", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--run", required=True, help="a train.py --out directory")
-    p.add_argument("--goal-image", nargs="*", default=[], help="goal image files (RGB)")
+    p.add_argument("--run", required=True, metavar="DIR", help="a train.py --out directory")
+    p.add_argument("--goal-image", nargs="*", default=[], metavar="PNG",
+                   help="goal image files (RGB); default: sample --n-goals goals")
     p.add_argument("--n-goals", type=int, default=8,
-                   help="goals sampled from the task's goal space when no --goal-image")
-    p.add_argument("--seed", type=int, default=0, help="start states and sampled goals")
-    p.add_argument("--seg-ckpt", help="segmentation to use (default: the run's)")
-    p.add_argument("--enc-ckpt", help="encoders to use (default: the run's)")
-    p.add_argument("--out", required=True)
+                   help="goals sampled from the task's goal space when no --goal-image "
+                        "(default 8)")
+    p.add_argument("--seed", type=int, default=0,
+                   help="PRNG seed of the start states and sampled goals (default 0)")
+    p.add_argument("--seg-ckpt", metavar="DIR", help="segmentation to use (default: the run's)")
+    p.add_argument("--enc-ckpt", metavar="DIR", help="encoders to use (default: the run's)")
+    p.add_argument("--out", required=True, metavar="OUT",
+                   help="output directory (outside the run directory)")
+    return p
+
+
+def main(argv=None) -> int:
+    p = make_parser()
     a = p.parse_args(argv)
     if a.n_goals <= 0:
         p.error(f"--n-goals must be positive, got {a.n_goals}")
     run, out = os.path.realpath(a.run), os.path.realpath(a.out)
     if out == run or out.startswith(run + os.sep):
         p.error(f"--out {a.out} is inside the run directory {a.run}: evaluate writes nothing there")
+    from roll_jax import evaluation  # JAX: only once the arguments are known to be good
+
     try:
-        images = [read_goal_image(path) for path in a.goal_image]
-        loaded = load_run(a.run, a.seg_ckpt, a.enc_ckpt)
-        res = evaluate(loaded, [im for im, _ in images], a.n_goals, a.seed)
+        images = [evaluation.read_goal_image(path) for path in a.goal_image]
+        loaded = evaluation.load_run(a.run, a.seg_ckpt, a.enc_ckpt)
+        res = evaluation.evaluate(loaded, [im for im, _ in images], a.n_goals, a.seed)
     except (FileNotFoundError, ValueError) as e:
         p.error(str(e))
     for path, (_, note) in zip(a.goal_image, images):
@@ -276,10 +68,21 @@ def main(argv=None) -> dict:
             print(f"note: goal image {path} {note}", file=sys.stderr)
     sources = list(a.goal_image) or ["sampled"] * a.n_goals
     notes = [n for _, n in images] or [None] * a.n_goals
-    summary = write_outputs(a.out, loaded, res, sources, notes, a.run, a.seed)
+    summary = evaluation.write_outputs(a.out, loaded, res, sources, notes, a.run, a.seed)
     print(json.dumps({k: v for k, v in summary.items() if k != "goals"}, indent=2))
-    return summary
+    return 0
+
+
+def __getattr__(name: str):
+    """The library's names (`load_run`, `evaluate`, ...) through this module too, loaded on
+    first use so that the command's --help does not wait for JAX."""
+    from roll_jax import evaluation
+
+    try:
+        return getattr(evaluation, name)
+    except AttributeError:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

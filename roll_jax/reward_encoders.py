@@ -89,7 +89,7 @@ def plot(results: list[dict], pairs, path: str, x_scale: float, x_unit: str) -> 
 
 
 def main(argv=None) -> dict:
-    from roll_jax import evaluate
+    from roll_jax import evaluation
 
     p = argparse.ArgumentParser(prog="python -m roll_jax.reward_encoders", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -103,7 +103,7 @@ def main(argv=None) -> dict:
     results, task, pairs = [], None, None
     try:
         for run in a.run:
-            loaded = evaluate.load_run(run)
+            loaded = evaluation.load_run(run)
             if task is None:
                 task = loaded.cfg.task
                 pairs = placement_pairs(loaded.env, jax.random.PRNGKey(a.seed), a.n)

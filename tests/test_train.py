@@ -246,12 +246,14 @@ def _tree_snapshot(root):
 def test_evaluate_writes_outputs_and_is_deterministic(runs, tmp_path):
     from PIL import Image
 
-    from roll_jax import evaluate
+    from roll_jax import evaluate, evaluation
 
     _cfg, full, *_ = runs
     before = _tree_snapshot(full)
     # one goal at a time throughout: every call below runs the same compiled rollout
-    summary = evaluate.main(["--run", full, "--n-goals", "1", "--out", str(tmp_path / "sampled")])
+    argv = ["--run", full, "--n-goals", "1", "--out", str(tmp_path / "sampled")]
+    assert evaluate.main(argv) == 0
+    summary = json.loads((tmp_path / "sampled" / "evaluation.json").read_text())
     assert summary["checkpoint_epoch"] == 2 and summary["seeds"] == 2
     for name in ("evaluation.json", "goal_00.png", "goal_00_seed1.gif", "final_00_seed0.png"):
         assert os.path.exists(tmp_path / "sampled" / name), name
@@ -261,11 +263,11 @@ def test_evaluate_writes_outputs_and_is_deterministic(runs, tmp_path):
     # the same distances.
     big = Image.open(tmp_path / "sampled" / "goal_00.png").resize((96, 96))
     big.save(tmp_path / "goal.png")
-    loaded = evaluate.load_run(full)
-    img, note = evaluate.read_goal_image(str(tmp_path / "goal.png"))
+    loaded = evaluation.load_run(full)
+    img, note = evaluation.read_goal_image(str(tmp_path / "goal.png"))
     assert img.shape == (48, 48, 3) and "96x96" in note
-    first = evaluate.evaluate(loaded, [img], 1)
-    again = evaluate.evaluate(loaded, [img], 1)
+    first = evaluation.evaluate(loaded, [img], 1)
+    again = evaluation.evaluate(loaded, [img], 1)
     np.testing.assert_array_equal(first["latent_distance"], again["latent_distance"])
     assert "final_distance" not in first  # no goal state behind a user's image
     assert _tree_snapshot(full) == before  # nothing in the run directory was written
@@ -276,7 +278,7 @@ def test_evaluate_refuses_bad_input(runs, tmp_path, capsys):
 
     from PIL import Image
 
-    from roll_jax import evaluate
+    from roll_jax import evaluate, evaluation
 
     _cfg, full, *_ = runs
     Image.new("L", (48, 48)).save(tmp_path / "gray.png")
@@ -291,16 +293,16 @@ def test_evaluate_refuses_bad_input(runs, tmp_path, capsys):
     bare = tmp_path / "bare"
     bare.mkdir()
     with pytest.raises(FileNotFoundError, match="no config.json"):
-        evaluate.load_run(str(bare))
+        evaluation.load_run(str(bare))
     shutil.copy(os.path.join(full, "config.json"), bare / "config.json")
     with pytest.raises(FileNotFoundError, match="no checkpoint"):
-        evaluate.load_run(str(bare))
+        evaluation.load_run(str(bare))
     other = tmp_path / "other_enc"
     shutil.copytree(os.path.join(full, "encoders"), other)
     meta = json.loads((other / "meta.json").read_text())
     (other / "meta.json").write_text(json.dumps({**meta, "task": "hurdle_top"}))
     with pytest.raises(ValueError, match="task='hurdle_top'"):
-        evaluate.load_run(full, enc_ckpt=str(other))
+        evaluation.load_run(full, enc_ckpt=str(other))
     with pytest.raises(SystemExit):
         evaluate.main(["--run", full, "--out", os.path.join(full, "eval")])
     assert "inside the run directory" in capsys.readouterr().err
