@@ -6,6 +6,7 @@ Figure 4, the ablation figure and a results table.
     python -m roll_jax.reproduce ... --ablations            # + ROLL ablations on hurdle_top
     python -m roll_jax.reproduce ... --report-only          # redraw from the runs on disk
     python -m roll_jax.reproduce ... --jobs 2               # 2 cells at once (CPU)
+    python -m roll_jax.reproduce ... --algos roll skewfit oracle   # + the state oracle's cells
 
 Each cell is one `roll_jax.train.run` in DIR/runs/TASK__VARIANT (all its seeds in one
 program: vmapped on a GPU, one after the other on a CPU, `--seed-batch`; sharded over
@@ -16,7 +17,8 @@ fitted once per task (DIR/segmentation/TASK, shared by the task's ROLL runs: sam
 config, so the same fit); pre-training datasets and models are shared the same way
 (DIR/pretrain, keyed by what they were built from). Then DIR/figure4.png, DIR/ablations.png
 (with --ablations), DIR/results.md and DIR/results.csv are drawn from the runs' metrics.csv
-files.
+files. (`roll-reproduce` is the same command once the package is installed; --preset
+defaults to cpu.)
 """
 
 from __future__ import annotations
@@ -32,9 +34,12 @@ import time
 import numpy as np
 
 from configs.overrides import parse_overrides
-from configs.train import ALGOS, PRESETS, TASKS
-from roll_jax import plots, train
-from roll_jax.run_dir import read_rows
+from configs.train import ALGOS, PRESETS, TASKS, build_config
+from roll_jax import plots
+from roll_jax.run_dir import check_resume, is_complete, read_rows
+
+# (roll_jax.train, and with it JAX, is imported where a cell runs: --help and --dry-run do
+# without it.)
 
 ABLATION_TASK = "hurdle_top"
 # variant -> (algo, ablation flags for build_config)
@@ -44,14 +49,18 @@ VARIANTS = {
     "roll_no_matching_loss": ("roll", {"matching_loss": False}),
     "roll_no_lstm": ("roll", {"use_lstm": False}),
     "roll_no_object_vae": ("roll", {"use_object_vae": False}),
+    "oracle": ("oracle", {}),
 }
 ABLATIONS = ("roll", "roll_no_matching_loss", "roll_no_lstm", "roll_no_object_vae")
 LABELS = {"roll": "ROLL", "skewfit": "Skew-Fit", "roll_no_matching_loss": "ROLL, no matching loss",
-          "roll_no_lstm": "ROLL, no LSTM", "roll_no_object_vae": "ROLL, no object-VAE"}
+          "roll_no_lstm": "ROLL, no LSTM", "roll_no_object_vae": "ROLL, no object-VAE",
+          "oracle": "state oracle"}
 # Fields the grid sets itself; a --set of them would contradict it.
 GRID_FIELDS = ("task", "algo", "preset", "seeds", "matching_loss", "use_lstm", "use_object_vae")
 METRIC = "final_distance"
 DEFAULT_SEEDS = {"paper": 6, "smoke": 2}
+DEFAULT_PRESET = "cpu"
+DEFAULT_ALGOS = ("roll", "skewfit")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -68,18 +77,25 @@ def run_dir(out: str, task: str, variant: str) -> str:
 
 def parse_args(argv=None):
     p = argparse.ArgumentParser(prog="python -m roll_jax.reproduce", description=__doc__,
-                                formatter_class=argparse.RawTextHelpFormatter)
-    p.add_argument("--preset", required=True, help=f"one of {', '.join(PRESETS)}")
-    p.add_argument("--out", required=True)
-    p.add_argument("--tasks", nargs="+", default=list(TASKS), metavar="TASK")
-    p.add_argument("--algos", nargs="+", default=["roll", "skewfit"], metavar="ALGO")
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--preset", default=DEFAULT_PRESET, metavar="PRESET",
+                   help=f"one of {', '.join(PRESETS)} (configs/presets.py; default "
+                        f"{DEFAULT_PRESET})")
+    p.add_argument("--out", required=True, metavar="DIR",
+                   help="grid directory: DIR/runs/TASK__VARIANT, figures and tables")
+    p.add_argument("--tasks", nargs="+", default=list(TASKS), metavar="TASK",
+                   help=f"some of {', '.join(TASKS)} (default: all)")
+    p.add_argument("--algos", nargs="+", default=list(DEFAULT_ALGOS), metavar="ALGO",
+                   help=f"some of {', '.join(ALGOS)} (default: {' '.join(DEFAULT_ALGOS)}; "
+                        "oracle: the state oracle through the same loop)")
     p.add_argument("--ablations", action="store_true",
                    help=f"also ROLL without matching loss / LSTM / object-VAE on {ABLATION_TASK}")
     p.add_argument("--seeds", type=int, default=None,
                    help="seeds per run; default 2 with --preset smoke (a median and a band, "
                         "at CPU cost), otherwise 6 (the paper's)")
-    p.add_argument("--seed", type=int, default=0, help="base PRNG seed of every run")
-    p.add_argument("--devices", default="all", help="'all' or N: shard the seeds over devices")
+    p.add_argument("--seed", type=int, default=0, help="base PRNG seed of every run (default 0)")
+    p.add_argument("--devices", default="all",
+                   help="'all' or N: shard the seeds over devices (default all)")
     p.add_argument("--seed-batch", default="auto",
                    help="'auto' or N: seeds vmapped side by side per device (as train.py)")
     p.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE",
@@ -127,7 +143,7 @@ def plan(a) -> list[Cell]:
     cells = []
     for task, variant in wanted:
         algo, flags = VARIANTS[variant]
-        cfg = train.build_config(task, algo, a.preset, seeds=a.seeds, overrides=a.set, **flags)
+        cfg = build_config(task, algo, a.preset, seeds=a.seeds, overrides=a.set, **flags)
         cells.append(Cell(task, variant, cfg, run_dir(a.out, task, variant)))
     return cells
 
@@ -138,15 +154,15 @@ def check_existing(cells: list[Cell], seed: int | None = None) -> None:
     for c in cells:
         if os.path.exists(os.path.join(c.out, "config.json")):
             try:
-                train.check_resume(c.out, c.cfg, seed)
+                check_resume(c.out, c.cfg, seed)
             except ValueError as e:
-                state = "finished" if train.is_complete(c.out) else "unfinished"
+                state = "finished" if is_complete(c.out) else "unfinished"
                 raise ValueError(f"{c.out} holds a {state} run made with other settings ({e}); use "
                                  f"another --out or the same settings") from None
 
 
 def status(c: Cell) -> str:
-    if train.is_complete(c.out):
+    if is_complete(c.out):
         return "done"
     return "resume" if os.path.exists(os.path.join(c.out, "config.json")) else "new"
 
@@ -224,7 +240,10 @@ def _run_cell(cfg, out: str, resume: bool, seg_ckpt: str, seed: int, devices, se
     (spawned: a fresh JAX) sets up first."""
     if cache is not None:
         _use_cache(cache)
-    run_fn = train.run if run_fn is None else run_fn
+    if run_fn is None:
+        from roll_jax import train
+
+        run_fn = train.run
     t0 = time.time()
     run_fn(cfg, out, resume=resume, seg_ckpt=seg_ckpt, seed=seed, devices=devices,
            seed_batch=seed_batch, pretrain_cache=pretrain_dir(out), progress=progress)
@@ -413,7 +432,7 @@ def report(cells: list[Cell], out: str, ablations: bool) -> list[dict]:
         rows = rows_of[(c.task, c.variant)]
         if rows:
             entries.append({"task": c.task, "algo": c.variant, **final_stats(rows),
-                            "complete": train.is_complete(c.out)})
+                            "complete": is_complete(c.out)})
     results_table(entries, out)
     return entries
 

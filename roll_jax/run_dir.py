@@ -78,6 +78,29 @@ def read_inputs(out: str) -> dict:
         return json.load(f)
 
 
+def check_resume(out: str, cfg: TrainConfig, seed: int | None = None) -> None:
+    """A resumed run must have the same config as the command line (before any compile), and
+    the same base seed where both are known (`seed` None, or a run written before inputs.json
+    held its seed: not checked)."""
+    path = os.path.join(out, "config.json")
+    if not os.path.exists(path):
+        raise ValueError(f"--resume: no run to resume in {out} (missing config.json)")
+    with open(path) as f:
+        # Read back through the dataclasses: a field added since the run was written takes its
+        # default, which by convention keeps the behaviour the run was made with.
+        saved = config_json(config_from_json(json.load(f)))
+    now = config_json(cfg)
+    diff = [k for k in sorted(set(saved) | set(now)) if saved.get(k) != now.get(k)]
+    if diff:
+        k = diff[0]
+        raise ValueError(f"--resume: config of {out} differs from the command line in {k!r}: "
+                         f"saved {saved.get(k)!r}, now {now.get(k)!r}")
+    saved_seed = read_inputs(out).get("seed")
+    if seed is not None and saved_seed is not None and int(seed) != int(saved_seed):
+        raise ValueError(f"--resume: {out} was trained with --seed {saved_seed}, the command "
+                         f"line gives --seed {seed}")
+
+
 def write_rows(csv_path: str, rows: list[dict]) -> None:
     with open(csv_path, "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))

@@ -27,6 +27,7 @@ from roll_jax import loop, pretrain, plots, run_dir
 from roll_jax import sharding as shd
 from roll_jax.checkpoint import restore_train_state, save_train_state, train_state_manager
 from roll_jax.run_dir import COMPLETE_MARKER, is_complete  # noqa: F401 (the driver's API)
+from roll_jax.run_dir import check_resume
 from roll_jax.goal_encoding import Frozen, goal_encoder
 
 LOSS_KEYS = ("q_loss", "policy_loss", "alpha_loss", "vae_loss", "lstm_loss")
@@ -74,31 +75,6 @@ class PhaseTimes:
 
     def as_dict(self) -> dict:
         return {"wall_s": self.wall, "cpu_s": self.cpu}
-
-
-def check_resume(out: str, cfg: TrainConfig, seed: int | None = None) -> None:
-    """A resumed run must have the same config as the command line (before any compile), and
-    the same base seed where both are known (`seed` None, or a run written before inputs.json
-    held its seed: not checked)."""
-    path = os.path.join(out, "config.json")
-    if not os.path.exists(path):
-        raise ValueError(f"--resume: no run to resume in {out} (missing config.json)")
-    from configs.train import config_from_json
-
-    with open(path) as f:
-        # Read back through the dataclasses: a field added since the run was written takes its
-        # default, which by convention keeps the behaviour the run was made with.
-        saved = run_dir.config_json(config_from_json(json.load(f)))
-    now = run_dir.config_json(cfg)
-    diff = [k for k in sorted(set(saved) | set(now)) if saved.get(k) != now.get(k)]
-    if diff:
-        k = diff[0]
-        raise ValueError(f"--resume: config of {out} differs from the command line in {k!r}: "
-                         f"saved {saved.get(k)!r}, now {now.get(k)!r}")
-    saved_seed = run_dir.read_inputs(out).get("seed")
-    if seed is not None and saved_seed is not None and int(seed) != int(saved_seed):
-        raise ValueError(f"--resume: {out} was trained with --seed {saved_seed}, the command "
-                         f"line gives --seed {seed}")
 
 
 def check_given(**paths) -> None:

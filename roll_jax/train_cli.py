@@ -158,7 +158,7 @@ def check_run(a, p, cfg, out) -> None:
     except FileNotFoundError as e:
         p.error(str(e))
     if a.resume:
-        from roll_jax.train import check_resume
+        from roll_jax.run_dir import check_resume
 
         try:
             check_resume(out, cfg, a.seed)
