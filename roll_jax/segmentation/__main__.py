@@ -2,9 +2,10 @@
 
     python -m roll_jax.segmentation --task puck_push [--preset smoke|cpu|paper] --out DIR
 
-Writes DIR/ckpt (orbax params + meta.json), DIR/segmentation_eval.json (iou, robot_leakage,
-background_leakage, timings), DIR/figure2.png (original, foreground, robot mask, object mask,
-segmented object) and DIR/background.png (the MOG2 background image).
+(`roll-segmentation` once installed; --preset defaults to cpu.) Writes DIR/ckpt (orbax
+params + meta.json), DIR/segmentation_eval.json (iou, robot_leakage, background_leakage,
+timings), DIR/figure2.png (original, foreground, robot mask, object mask, segmented object)
+and DIR/background.png (the MOG2 background image).
 """
 
 from __future__ import annotations
@@ -17,16 +18,17 @@ import time
 
 
 def parse_args(argv=None):
-    import envs_mjx
     from configs.presets import PRESETS
+    from configs.train import TASKS
 
     p = argparse.ArgumentParser(prog="python -m roll_jax.segmentation", description=__doc__,
-                                formatter_class=argparse.RawTextHelpFormatter)
-    p.add_argument("--task", required=True)
-    p.add_argument("--preset", default="paper",
-                   help=f"one of {', '.join(PRESETS)} (configs/presets.py)")
-    p.add_argument("--out", required=True)
-    p.add_argument("--seed", type=int, default=0)
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--task", required=True, metavar="TASK", help=f"one of {', '.join(TASKS)}")
+    p.add_argument("--preset", default="cpu", metavar="PRESET",
+                   help=f"one of {', '.join(PRESETS)} (configs/presets.py; default cpu)")
+    p.add_argument("--out", required=True, metavar="DIR", help="output directory")
+    p.add_argument("--seed", type=int, default=0,
+                   help="PRNG seed of the fit and the evaluation states (default 0)")
     p.add_argument("--eval-states", type=int, default=None, help="override the preset")
     p.add_argument("--unet-epochs", type=int, default=None, help="override the preset")
     p.add_argument("--n-frames", type=int, default=None, help="override the preset")
@@ -40,14 +42,14 @@ def parse_args(argv=None):
     p.add_argument("--eval-only", action="store_true",
                    help="re-evaluate the checkpoint in DIR/ckpt instead of fitting")
     a = p.parse_args(argv)
-    if a.task not in envs_mjx.TASK_NAMES:
-        p.error(f"unknown --task {a.task!r}; expected one of {', '.join(envs_mjx.TASK_NAMES)}")
+    if a.task not in TASKS:
+        p.error(f"unknown --task {a.task!r}; expected one of {', '.join(TASKS)}")
     if a.preset not in PRESETS:
         p.error(f"unknown --preset {a.preset!r}; expected one of {', '.join(PRESETS)}")
     return a
 
 
-def main(argv=None) -> dict:
+def main(argv=None) -> int:
     a = parse_args(argv)
     import jax
     import numpy as np
@@ -116,8 +118,8 @@ def main(argv=None) -> dict:
     cv2.imwrite(os.path.join(a.out, "background.png"),
                 cv2.resize(bg[..., ::-1], (192, 192), interpolation=cv2.INTER_NEAREST))
     print(json.dumps(summary, indent=2))
-    return summary
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())
