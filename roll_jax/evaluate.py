@@ -75,13 +75,15 @@ def main(argv=None) -> int:
 
 def __getattr__(name: str):
     """The library's names (`load_run`, `evaluate`, ...) through this module too, loaded on
-    first use so that the command's --help does not wait for JAX."""
-    from roll_jax import evaluation
+    first use so that the command's --help does not wait for JAX. (Dunder names are not
+    forwarded: the import system probes e.g. `__path__` on `from roll_jax.evaluate import
+    main`.)"""
+    if not name.startswith("__"):
+        from roll_jax import evaluation
 
-    try:
-        return getattr(evaluation, name)
-    except AttributeError:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+        if hasattr(evaluation, name):
+            return getattr(evaluation, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 if __name__ == "__main__":
