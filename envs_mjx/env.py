@@ -288,11 +288,36 @@ class Env:
         """A hand position uniform in the task's hand box (3,)."""
         return _uniform(key, self.spec.hand_low, self.spec.hand_high)
 
+    def random_object_position(self, key):
+        """An object position where the object can be (`TaskSpec.region`): one of the region's
+        boxes with equal probability, then uniform in it (the hurdles' corridor sampler)."""
+        boxes = self.spec.region
+        k_box, k_pos = jax.random.split(key)
+        low = jnp.asarray([b[0] for b in boxes], jnp.float32)
+        high = jnp.asarray([b[1] for b in boxes], jnp.float32)
+        i = jax.random.randint(k_box, (), 0, len(boxes))
+        return _uniform(k_pos, low[i], high[i])
+
     def random_placement(self, k_hand, k_object) -> EnvState:
-        """A state at rest (`place`) with the hand uniform in its box and the object uniform in
-        its goal space: datasets and analyses that need every configuration, not goals."""
-        return self.place(self.random_hand(k_hand),
-                          _uniform(k_object, self.spec.object_goal_low, self.spec.object_goal_high))
+        """A state at rest (`place`) with the hand uniform in its box and the object where it
+        can be (`random_object_position`): datasets and analyses that need every
+        configuration, not goals."""
+        return self.place(self.random_hand(k_hand), self.random_object_position(k_object))
+
+    def region_placement(self, k_hand, k_object) -> EnvState:
+        """The hurdles' scene-VAE pretraining states (the reference's corridor sampler): the
+        object and the hand each placed independently over the object's region."""
+        hand = self.random_object_position(k_hand)
+        z = jnp.asarray(self.spec.hand_low[2:], jnp.float32)
+        return self.place(jnp.concatenate([hand, z]), self.random_object_position(k_object))
+
+    def away_placement(self, k_object) -> EnvState:
+        """The object where it can be and the arm out of the camera's view (`hand_away`): the
+        reference's object-VAE / LSTM pretraining images on the hurdles."""
+        if self.spec.hand_away is None:
+            raise ValueError(f"task {self.name!r} has no hand_away position")
+        return self.place(jnp.asarray(self.spec.hand_away, jnp.float32),
+                          self.random_object_position(k_object))
 
     def sample_goal(self, key) -> EnvState:
         """A state placed at a goal configuration drawn from the task's goal space."""

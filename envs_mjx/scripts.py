@@ -13,15 +13,23 @@ def _seq(*parts) -> np.ndarray:
 
 
 def push_forward(n_steps: int = 30) -> np.ndarray:
-    """puck_push: centre the claw behind the puck (x +0.02), then push it +y."""
-    return _seq(([1.0, 0.0], 1), ([0.0, 1.0], n_steps - 1))
+    """puck_push: from the reset beside the puck, centre the claw behind it (x +0.03), then
+    push it +y to the hand box's far edge."""
+    return _seq(([0.75, 0.0], 2), ([0.0, 1.0], n_steps - 2))
 
 
-def hurdle_forward(n_steps: int = 30) -> np.ndarray:
-    """Hurdle scenes: push the puck +y along the corridor right of the middle hurdle, stop
-    before it reaches the far wall, then hold. (Driving the hand on once the puck is pinned
-    against a wall squeezes it out violently, a chaotic event where MJX and C MuJoCo part.)"""
-    return _seq(([0.0, 1.0], 6), ([0.0, 0.0], n_steps - 6))
+def hurdle_bottom_forward(n_steps: int = 30) -> np.ndarray:
+    """hurdle_bottom: from the reset on the puck's -x side, line up with the puck's row, push
+    it +x along the corridor towards the goal column, stop before the wall, then hold.
+    (Driving the hand on once the puck is pinned against a wall squeezes it out violently, a
+    chaotic event where MJX and C MuJoCo part.)"""
+    return _seq(([0.0, 1.0], 2), ([1.0, 0.0], 6), ([0.0, 0.0], n_steps - 8))
+
+
+def hurdle_top_forward(n_steps: int = 30) -> np.ndarray:
+    """hurdle_top: from the reset right of the puck, go round it (+y, then -x above it), push
+    it -y down its column, stop before the wall, then hold."""
+    return _seq(([0.0, 1.0], 9), ([-1.0, 0.0], 3), ([0.0, -1.0], 6), ([0.0, 0.0], n_steps - 18))
 
 
 def door_pull(n_steps: int = 30) -> np.ndarray:
@@ -36,8 +44,8 @@ def pickup_lift(n_steps: int = 30) -> np.ndarray:
 
 SCRIPTS = {
     "puck_push": push_forward,
-    "hurdle_bottom": hurdle_forward,
-    "hurdle_top": hurdle_forward,
+    "hurdle_bottom": hurdle_bottom_forward,
+    "hurdle_top": hurdle_top_forward,
     "door_open": door_pull,
     "pickup": pickup_lift,
 }
