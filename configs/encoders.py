@@ -23,6 +23,10 @@ _VAE_MATCHING_COEF = dict(zip(TASKS, (400.0, 400.0, 800.0, 50.0, 50.0)))  # Tabl
 # Not in the paper: the reference code's launch files (occlusion_prob) occlude this share of
 # the object pre-training images (push and both hurdles 0.3, door and pickup 0).
 _PRETRAIN_OCCLUDED_FRACTION = dict(zip(TASKS, (0.3, 0.3, 0.3, 0.0, 0.0)))
+# Not in the paper: the reference code's hurdle object-VAE / LSTM images move the hand out of
+# view (ROLL/generate_LSTM_vae_only_dataset.py); the other tasks' show it.
+_PRETRAIN_HAND = dict(zip(TASKS, ("random", "away", "away", "random", "random")))
+PRETRAIN_HANDS = ("random", "away")
 
 SCENE_FEATURE_DIM = 576  # "Network Architectures": final encoder feature vector of size 576
 OBJECT_FEATURE_DIM = 6  # "Network Architectures": object-VAE feature vector of size 6
@@ -79,6 +83,11 @@ class VAEConfig:
     # object and the hand placed independently. The reference code pretrains on "set to goal"
     # images only (1.0); 0 keeps every placement of the goal space equally likely.
     pretrain_goal_share: float = 0.0
+    # Where the hand is in the other object pre-training images: "random" (uniform in its
+    # box, beside the object placed where it can be) or "away" (out of the camera's view: the
+    # reference code's hurdle object-VAE / LSTM data, ROLL/generate_LSTM_vae_only_dataset.py,
+    # hand at (-0.2, 0.2)). Per task: object_vae_config.
+    pretrain_hand: str = "random"
     # Not in the paper: a second matching loss, between the codes of two renderings of one
     # pre-training object state with the hand at two random places in its box (the arm hides
     # the object as it does, where `occlusion_shape` drops pixels), times this coefficient;
@@ -142,6 +151,9 @@ class VAEConfig:
                      "pretrain_goal_share"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"VAEConfig.{name} must be in [0, 1], got {getattr(self, name)!r}")
+        if self.pretrain_hand not in PRETRAIN_HANDS:
+            raise ValueError(f"VAEConfig.pretrain_hand must be one of {PRETRAIN_HANDS}, got "
+                             f"{self.pretrain_hand!r}")
         if self.occlusion_shape not in OCCLUSION_SHAPES:
             raise ValueError(f"VAEConfig.occlusion_shape must be one of {OCCLUSION_SHAPES}, got "
                              f"{self.occlusion_shape!r}")
@@ -244,6 +256,7 @@ def object_vae_config(task: str, **overrides) -> VAEConfig:
         "batch_size": 128,  # Table 3
         "kl_reference_batch": 128,  # Table 3: the batch beta was tuned with (see effective_beta)
         "pretrain_occluded_fraction": _PRETRAIN_OCCLUDED_FRACTION[task],  # reference code
+        "pretrain_hand": _PRETRAIN_HAND[task],  # reference code
     }
     return VAEConfig(**{**values, **overrides})
 

@@ -35,7 +35,8 @@ VAE_SCHEDULES = ("custom_schedule", "custom_schedule_2", "smoke", "none")
 
 
 # The string-valued TrainConfig fields and what each may be.
-CHOICES = {"vae_schedule": VAE_SCHEDULES, "scene_pretrain_data": ("random_policy", "goals"),
+CHOICES = {"vae_schedule": VAE_SCHEDULES,
+           "scene_pretrain_data": ("random_policy", "goals", "region"),
            "reward_norm": REWARD_NORMS, "prior_goals": ("standard", "buffer"),
            "sac_schedule": SAC_SCHEDULES}
 
@@ -83,8 +84,9 @@ class TrainConfig:
     vae_schedule: str = "custom_schedule_2"  # Skew-Fit appendix C.5 (rlkit vae_schedules)
     vae_online_batch: int = 64  # Table 3: scene-VAE batch size
     # Scene-VAE pretraining images: "random_policy" ("Training schedules": a random policy's
-    # frames) or "goals" (states set to random goals: the reference code's push and hurdle
-    # launch files, oracle_dataset_using_set_to_goal=True); per task in configs/<task>.py.
+    # frames), "goals" (states set to random goals: the reference code's puck_push launch file,
+    # oracle_dataset_using_set_to_goal=True) or "region" (hand and object each over the
+    # object's region: the reference's hurdle corridor sampler); per task in configs/<task>.py.
     scene_pretrain_data: str = "random_policy"
     # The buffer's cached goal latents (LSTM outputs) are recomputed after online encoder
     # training every this many epochs (1: after each training, as rlkit refreshes its latents).

@@ -37,9 +37,10 @@ from roll_jax.goal_encoding import goal_encoder
 from roll_jax.checkpoint import read_meta, write_meta
 from roll_jax.segmentation import pipeline
 
-# 2: the VAE losses weigh the KL by beta / B (VAEConfig.effective_beta); version-1 encoders
-# were trained with beta per image (a collapsed object-VAE) and are refused on load.
-CHECKPOINT_VERSION = 2
+# 3: the push tasks' hand boxes, resets and pretraining placements are the reference code's
+# (envs_mjx/tasks.py); encoders of version 2 saw the earlier task numbers and are refused on
+# load. (Version 1 weighed the KL by beta per image, a collapsed object-VAE.)
+CHECKPOINT_VERSION = 3
 
 
 @struct.dataclass
@@ -53,12 +54,16 @@ def scene_dataset(env, key, n_images: int, source: str = "random_policy") -> jax
     """uint8 [n, 48, 48, 3]: "random_policy", frames of random-policy episodes from resets
     (after each step; the paper's text); "goals", states set to goals drawn from the task's
     goal space (`env.sample_goal`: hand and object placed), rlkit's
-    `oracle_dataset_using_set_to_goal` that the reference code's push and hurdle launch files
-    use (TrainConfig.scene_pretrain_data)."""
+    `oracle_dataset_using_set_to_goal` that the reference code's puck_push launch file uses;
+    "region", hand and object each placed over where the object can be (`env.region_placement`:
+    the reference's hurdle corridor sampler) (TrainConfig.scene_pretrain_data)."""
     if source == "goals":
         return _goal_images_fn(env)(jax.random.split(key, n_images))
+    if source == "region":
+        return _region_images_fn(env)(jax.random.split(key, n_images))
     if source != "random_policy":
-        raise ValueError(f"scene data source must be 'random_policy' or 'goals', got {source!r}")
+        raise ValueError(f"scene data source must be 'random_policy', 'goals' or 'region', "
+                         f"got {source!r}")
     n_eps = -(-n_images // env.horizon)
     rgb = _random_episodes_fn(env)(jax.random.split(key, n_eps))
     return rgb.reshape((-1,) + rgb.shape[2:])[:n_images]
@@ -69,6 +74,11 @@ def scene_dataset(env, key, n_images: int, source: str = "random_policy") -> jax
 @functools.lru_cache(maxsize=None)
 def _goal_images_fn(env):
     return jax.jit(jax.vmap(lambda k: env.render(env.sample_goal(k))))
+
+
+@functools.lru_cache(maxsize=None)
+def _region_images_fn(env):
+    return jax.jit(jax.vmap(lambda k: env.render(env.region_placement(*jax.random.split(k)))))
 
 
 @functools.lru_cache(maxsize=None)
@@ -85,12 +95,12 @@ def _random_episodes_fn(env):
 
 
 def object_dataset(env, seg_params, key, n_images: int, goal_share: float = 0.0,
-                   arm_pairs: bool = False):
+                   arm_pairs: bool = False, hand: str = "random"):
     """(segmented images uint8 [n, 48, 48, 3], object masks bool [n, 48, 48]) of random object
     placements, masks from `segment`; the first round(goal_share * n) are states set to goals
     (`env.sample_goal`) instead. The placements are taken as placed (like the goal images),
     not settled by a few physics steps: that keeps MJX's step, the slowest program to compile,
-    out of this one. `arm_pairs`: also the partners (images, masks) of `VAEConfig.arm_pair_coef`,
+    out of this one. `hand`: "random" (uniform in its box) or "away" (out of view). `arm_pairs`: also the partners (images, masks) of `VAEConfig.arm_pair_coef`,
     each image's object state with the hand at another random place; a goal image is its own
     partner. The first two arrays do not depend on `arm_pairs`."""
     if not 0.0 <= goal_share <= 1.0:
@@ -104,7 +114,8 @@ def object_dataset(env, seg_params, key, n_images: int, goal_share: float = 0.0,
         partners.append(goals)
     if n_images > n_goals:
         placed = pipeline.random_object_states(env, k_place, n_images - n_goals,
-                                               settle_steps=0, arm_pairs=arm_pairs)
+                                               settle_steps=0, arm_pairs=arm_pairs,
+                                               hand=hand)
         parts.append(placed[0])
         if arm_pairs:
             partners.append(placed[2])
@@ -245,10 +256,12 @@ def pretrain(cfg: TrainConfig, env, seg_params, key, progress: bool = True,
         arm_pairs = ocfg.arm_pair_coef > 0
         if arm_pairs:  # likewise
             od_spec["arm_pairs"] = True
+        if ocfg.pretrain_hand != "random":  # likewise
+            od_spec["hand"] = ocfg.pretrain_hand
 
         def build_object_data():
             arrays = object_dataset(env, seg_params, k_od, n_obj, ocfg.pretrain_goal_share,
-                                    arm_pairs)
+                                    arm_pairs, ocfg.pretrain_hand)
             if ocfg.pretrain_occluded_fraction > 0:  # on each rendering, independently
                 arrays = sum((occlude_share(jax.random.fold_in(k_od, 1 + i // 2),
                                             *arrays[i:i + 2], ocfg.pretrain_occluded_fraction,
@@ -355,6 +368,12 @@ def load(path: str, cfg: TrainConfig) -> Pretrained:
     import orbax.checkpoint as ocp
 
     path, meta = read_meta(path, "encoder")
+    if meta.get("version") == 2:
+        raise ValueError(
+            f"encoder checkpoint {path} was pretrained on the earlier task numbers (a 40 x 30 cm "
+            f"hand box on every push task, other hand resets, hurdle pretraining data only in "
+            f"the goal strip); the tasks now use the reference code's (envs_mjx/tasks.py): "
+            f"pretrain them again")
     if meta.get("version") != CHECKPOINT_VERSION:
         raise ValueError(
             f"encoder checkpoint {path} has version {meta.get('version')!r}, this code needs "

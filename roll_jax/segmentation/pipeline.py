@@ -191,14 +191,14 @@ def segmented_image(rgb, mask):
 # ----------------------------------------------------------------------------- evaluation
 
 @functools.lru_cache(maxsize=None)
-def _object_states_fn(env, settle_steps: int, arm_pairs: bool = False):
+def _object_states_fn(env, settle_steps: int, arm_pairs: bool = False, hand: str = "random"):
     """jit(vmap) of one random object state, built once per env and settings: a fresh
     closure per call would trace and compile the MJX rollout and the renderer again."""
     from envs_mjx.rollout import random_actions, rollout
 
     def one(k):
         k_h, k_o, k_a = jax.random.split(k, 3)
-        state = env.random_placement(k_h, k_o)
+        state = env.away_placement(k_o) if hand == "away" else env.random_placement(k_h, k_o)
         if settle_steps:  # (0: kinematics only, no MJX step in the compiled program)
             state, _ = rollout(env, state, random_actions(k_a, settle_steps, env.action_size))
         if not arm_pairs:
@@ -211,9 +211,10 @@ def _object_states_fn(env, settle_steps: int, arm_pairs: bool = False):
 
 
 def random_object_states(env, key, n: int, settle_steps: int = 5, chunk: int = 32,
-                         arm_pairs: bool = False):
-    """States with the hand and the object uniform in their boxes (object in its goal space),
-    after a few random steps so the scene settles; returns numpy (rgb, labels) [n, H, W, ...].
+                         arm_pairs: bool = False, hand: str = "random"):
+    """States with the hand uniform in its box (`hand="away"`: out of view) and the object
+    where it can be (`env.random_placement`), after a few random steps so the scene settles;
+    returns numpy (rgb, labels) [n, H, W, ...].
     `arm_pairs`: (rgb, labels, rgb_b, labels_b), the second pair the same object states
     rendered with the hand at another random place. State i depends only on `key` and i (not
     on `chunk`), and its first rendering not on `arm_pairs`."""
@@ -222,7 +223,9 @@ def random_object_states(env, key, n: int, settle_steps: int = 5, chunk: int = 3
     keys = jax.random.split(key, n)
     pad = -n % chunk
     keys = jnp.take(keys, jnp.arange(n + pad) % n, axis=0)  # whole chunks, n < chunk too
-    run = _object_states_fn(env, settle_steps, arm_pairs)
+    if hand not in ("random", "away"):
+        raise ValueError(f"hand must be 'random' or 'away', got {hand!r}")
+    run = _object_states_fn(env, settle_steps, arm_pairs, hand)
     outs = [jax.device_get(run(keys[i:i + chunk])) for i in range(0, n + pad, chunk)]
     return tuple(np.concatenate(parts)[:n] for parts in zip(*outs))
 
