@@ -38,6 +38,7 @@ VAE_SCHEDULES = ("custom_schedule", "custom_schedule_2", "smoke", "none")
 CHOICES = {"vae_schedule": VAE_SCHEDULES,
            "scene_pretrain_data": ("random_policy", "goals", "region"),
            "reward_norm": REWARD_NORMS, "prior_goals": ("standard", "buffer"),
+           "achieved_encoding": ("sequence", "single"),
            "sac_schedule": SAC_SCHEDULES}
 
 
@@ -104,6 +105,11 @@ class TrainConfig:
     # N(mean, std) of the stored frame latents (rlkit's dist_mu / dist_std, the reference
     # code's sample_from_true_prior=False).
     prior_goals: str = "standard"
+    # The achieved goals on the reward's other side: "sequence", the LSTM run over the episode
+    # so far (the paper's z_t = g(z_hat_1..t)); "single", each frame one LSTM step from the zero
+    # state, the same function as a goal image's (the reference code's refresh_latents ->
+    # LSTM_wrapped_env._encode_lstm).
+    achieved_encoding: str = "sequence"
     # Ablations (paper section "Ablations"), flags on --algo roll.
     matching_loss: bool = True
     use_lstm: bool = True

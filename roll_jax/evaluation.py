@@ -144,7 +144,7 @@ def make_rollout(cfg: TrainConfig):
             lstm_params = None if state.lstm is None else state.lstm.params
             lat = enc.frame_latents(frozen, state.scene_vae.params,
                                     enc.goal_images(frozen, frames))
-            achieved = jax.vmap(lambda f: enc.sequence(lstm_params, f))(lat)[:, -1]
+            achieved = jax.vmap(lambda f: enc.achieved(lstm_params, f))(lat)[:, -1]
         return es, frames, goals, achieved
 
     return jax.jit(jax.vmap(one_seed, in_axes=(None, 0, None, None, None)))

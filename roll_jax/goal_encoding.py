@@ -49,6 +49,9 @@ class GoalEncoder:
     # The state oracle: true hand and object positions instead of latents, the true distance as
     # reward, nothing rendered for learning (loop.oracle_obs / oracle_goal).
     oracle: bool = False
+    # Achieved goals frame by frame (one LSTM step from the zero state, like a goal image)
+    # instead of the LSTM over the episode (TrainConfig.achieved_encoding).
+    achieved_single: bool = False
 
     @property
     def frame_dim(self) -> int:
@@ -75,6 +78,13 @@ class GoalEncoder:
         if not self.lstm:
             return frame_latents
         return lstm_encode(lstm_params, frame_latents)
+
+    def achieved(self, lstm_params, frame_latents):
+        """Achieved goals [T, goal_dim] of one episode's latents [T, d]: `sequence`, or with
+        `achieved_single` each frame by `single`, as a goal image is encoded."""
+        if self.achieved_single:
+            return self.single(lstm_params, frame_latents)
+        return self.sequence(lstm_params, frame_latents)
 
     def single(self, lstm_params, frame_latents):
         """Goals from single frames [..., d] (a goal image, or a prior sample): one LSTM step
@@ -106,9 +116,11 @@ def goal_encoder(cfg) -> GoalEncoder:
     if cfg.algo == "skewfit":
         return GoalEncoder(cfg.scene, None, segment=False, lstm=False, skewed_goals=True)
     if not cfg.use_object_vae:
-        return GoalEncoder(cfg.scene, None, segment=False, lstm=True)
+        return GoalEncoder(cfg.scene, None, segment=False, lstm=True,
+                           achieved_single=cfg.achieved_encoding == "single")
     object_cfg = cfg.object_vae
     if not (cfg.matching_loss and cfg.use_lstm):
         # Pretraining fits the object-VAE from this config, so the ablation reaches it too.
         object_cfg = dataclasses.replace(object_cfg, matching_coef=0.0)
-    return GoalEncoder(cfg.scene, object_cfg, segment=True, lstm=cfg.use_lstm)
+    return GoalEncoder(cfg.scene, object_cfg, segment=True, lstm=cfg.use_lstm,
+                       achieved_single=cfg.achieved_encoding == "single")

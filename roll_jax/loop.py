@@ -355,7 +355,7 @@ def collect_episode(cfg: TrainConfig, env, enc: GoalEncoder, frozen: Frozen, sta
         obs = z[:, :n_train].swapaxes(0, 1)
         goal_imgs = enc.goal_images(frozen, images)
         frame_lat = enc.frame_latents(frozen, scene_params, goal_imgs)
-        achieved = jax.vmap(lambda f: enc.sequence(lstm_params, f))(frame_lat)
+        achieved = jax.vmap(lambda f: enc.achieved(lstm_params, f))(frame_lat)
     traj = replay.Trajectory(
         images=images, object_images=goal_imgs, actions=actions[:, :n_train].swapaxes(0, 1),
         obs_latents=obs, frame_latents=frame_lat, goal_latents=achieved, rollout_goals=goals)

@@ -91,9 +91,9 @@ def refresh_scene(cfg: TrainConfig, enc: GoalEncoder, state):
 
 
 def refresh_goals(enc: GoalEncoder, state):
-    """The buffer's goal latents from its cached frame latents (the LSTM over each episode;
+    """The buffer's goal latents from its cached frame latents (`enc.achieved` of each episode;
     no image is encoded: the frame latents change only with `refresh_scene`)."""
     lstm_params = None if state.lstm is None else state.lstm.params
-    buf = replay.recompute(state.buffer, "goal_latents", lambda e: enc.sequence(lstm_params, e),
+    buf = replay.recompute(state.buffer, "goal_latents", lambda e: enc.achieved(lstm_params, e),
                            state.buffer.frame_latents, GOAL_REFRESH_CHUNK)
     return state.replace(buffer=buf)

@@ -382,3 +382,19 @@ def test_online_scene_vae_round_recomputes_log_p_of_the_filled_episodes_only():
             new.skew_log_p[i], skewfit.frame_log_p(cfg, new.scene_vae.params, buf.images[i],
                                                    keys[i]), rtol=1e-4)
     np.testing.assert_array_equal(np.asarray(new.skew_log_p[3]), -5.0)
+
+
+def test_single_achieved_encoding_is_the_goal_images_function_frame_by_frame():
+    seq = goal_encoder(make_config("puck_push", "roll", "smoke"))
+    one = goal_encoder(make_config("puck_push", "roll", "smoke", achieved_encoding="single"))
+    assert not seq.achieved_single and one.achieved_single
+    cfg = make_config("puck_push", "roll", "smoke")
+    lstm = encoders.init_lstm(jax.random.PRNGKey(1), cfg.lstm, seq.frame_dim)
+    x = jax.random.normal(jax.random.PRNGKey(2), (TT, seq.frame_dim))
+    single = one.achieved(lstm.params, x)
+    # frame t alone, one step from the zero state: what a goal image of that frame gets
+    for t in (0, 3, TT - 1):
+        np.testing.assert_allclose(single[t], one.single(lstm.params, x[t]), rtol=1e-5, atol=1e-6)
+    sequence = seq.achieved(lstm.params, x)
+    np.testing.assert_allclose(sequence[0], single[0], rtol=1e-5, atol=1e-6)  # same first step
+    assert float(jnp.abs(sequence[1:] - single[1:]).max()) > 1e-4  # later steps remember
