@@ -1,0 +1,292 @@
+"""Diagnosis of a push task's pretrained encoders and its reset, before any tuning.
+
+    python -m roll_jax.diagnose --task hurdle_bottom --run DIR [--out FILE.json] [--seed 0]
+
+DIR holds segmentation/ and encoders/ (a `roll_jax.pretrain --out` or a `train.py` run
+directory). Four measurements, each a question a failed learning run raises:
+
+(a) `path`: does ROLL's reward point the right way along the way the puck must go? Pucks are
+    placed every `step` along the task's corridor (`scenes.hurdle_path`; on puck_push a line
+    across the table), the hand out of view; each image goes segment -> object-VAE -> one LSTM
+    step, and its latent distance to a goal image's is ranked (Spearman) against the path
+    distance to the goal: over the whole path, beyond and within 8 cm of the goal.
+(b) `scene`: does the policy's input say where hand and puck are? The affine R^2 of hand xy
+    and puck xy from the scene-VAE's means, over states with the hand uniform in its box and
+    the puck where it can be (`env.random_placement`).
+(c) `random_pushes`: can exploration find the way? The share of random-policy episodes from
+    the task's reset whose puck moves >= 3 cm, and whose path distance to the goal falls by
+    >= 3 cm.
+(d) `prior_goals`: where are the goals the agent practises? N(0, I) samples through one LSTM
+    step (Algorithm 1's exploration and relabelling goals), decoded by the object-VAE; each
+    decoded puck's image centroid is matched to the nearest centroid of pucks rendered on a
+    1 cm grid over the table: where it lies, and how many decoded images show no puck.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+
+import numpy as np
+
+NEAR = 0.08  # m: "within 8 cm of the goal"
+TOWARDS = 0.03  # m: a random episode "moves the puck towards the goal" by this much
+# Goal puck positions: the centre of each task's puck goal space.
+GOALS = {"hurdle_bottom": (0.105, 0.60), "hurdle_top": (0.105, 0.575), "puck_push": (0.0, 0.6)}
+
+
+# ----------------------------------------------------------------------------- path geometry
+
+def task_path(task: str) -> np.ndarray:
+    """Waypoints [k, 2] of the way the puck can take to its goal: the hurdle corridor
+    (`scenes.hurdle_path`, ending at the goal column), or on puck_push a line along x through
+    the goal."""
+    from envs_mjx import scenes
+
+    if task in scenes.MIDDLE_WALL:
+        return np.asarray(scenes.hurdle_path(task), np.float64)
+    if task == "puck_push":
+        gy = GOALS[task][1]
+        return np.asarray([(-0.15, gy), (0.15, gy)], np.float64)
+    raise ValueError(f"task {task!r} has no puck path; expected one of {sorted(GOALS)}")
+
+
+def arclength(path: np.ndarray, points) -> np.ndarray:
+    """Arclength [n] of each point's projection onto the polyline `path` [k, 2]."""
+    pts = np.asarray(points, np.float64).reshape(-1, 2)
+    seg_a, seg_b = path[:-1], path[1:]
+    d = seg_b - seg_a
+    lengths = np.linalg.norm(d, axis=1)
+    start = np.concatenate([[0.0], np.cumsum(lengths)[:-1]])
+    t = np.clip(np.einsum("nkj,kj->nk", pts[:, None] - seg_a[None], d) / lengths ** 2, 0, 1)
+    proj = seg_a[None] + t[..., None] * d[None]
+    dist = np.linalg.norm(pts[:, None] - proj, axis=2)
+    k = np.argmin(dist, axis=1)
+    return start[k] + t[np.arange(len(pts)), k] * lengths[k]
+
+
+def path_points(path: np.ndarray, step: float) -> np.ndarray:
+    """Points every `step` along the polyline (both ends included)."""
+    out = []
+    for a, b in zip(path[:-1], path[1:]):
+        n = max(int(round(np.linalg.norm(b - a) / step)), 1)
+        out.append(a + np.linspace(0, 1, n, endpoint=False)[:, None] * (b - a))
+    out.append(path[-1:])
+    return np.concatenate(out)
+
+
+def path_distance(path: np.ndarray, points, goal) -> np.ndarray:
+    """Distance along the path from each point to the goal (both projected onto it)."""
+    return np.abs(arclength(path, points) - arclength(path, goal)[0])
+
+
+# ----------------------------------------------------------------------------- measurements
+
+def _render_fn(env):
+    import jax
+
+    def one(hand, puck):
+        return env.render(env.place(hand, puck))
+
+    return jax.jit(jax.vmap(one))
+
+
+def _hand_away(env) -> np.ndarray:
+    # The reference's object-only images move the hand to (-0.2, 0.2): out of this camera's view.
+    away = getattr(env.spec, "hand_away", None) or (-0.2, 0.2, env.spec.hand_low[2])
+    return np.asarray(away, np.float32)
+
+
+def _goal_hand(env) -> np.ndarray:
+    s = env.spec
+    xy = (np.asarray(s.hand_goal_low) + np.asarray(s.hand_goal_high)) / 2
+    return np.asarray([*xy, s.hand_low[2]], np.float32)
+
+
+def latent_along_path(env, encode_object, step: float = 0.01) -> dict:
+    """(a): the object latent distance along the task path against the path distance."""
+    from roll_jax.analysis import spearman
+
+    path = task_path(env.name)
+    goal = np.asarray(GOALS[env.name])
+    pts = path_points(path, step)
+    render = _render_fn(env)
+    away = np.repeat(_hand_away(env)[None], len(pts), 0)
+    rgb = np.asarray(render(away, pts.astype(np.float32)))
+    goal_rgb = np.asarray(render(_goal_hand(env)[None], goal[None].astype(np.float32)))
+    z = np.asarray(encode_object(rgb))
+    zg = np.asarray(encode_object(goal_rgb))[0]
+    lat = np.linalg.norm(z - zg, axis=-1)
+    pd = path_distance(path, pts, goal)
+    far, near = pd > NEAR, pd <= NEAR
+    return {"goal": goal.tolist(), "step": step, "n": int(len(pts)),
+            "spearman": spearman(pd, lat),
+            "spearman_beyond_8cm": spearman(pd[far], lat[far]) if far.sum() > 2 else None,
+            "spearman_within_8cm": spearman(pd[near], lat[near]) if near.sum() > 2 else None,
+            "profile": {"path_cm": np.round(pd * 100, 2).tolist(),
+                        "latent": np.round(lat, 4).tolist(),
+                        "puck_xy": np.round(pts, 4).tolist()}}
+
+
+def scene_r2(env, encode_scene, key, n: int = 1000) -> dict:
+    """(b): affine R^2 of hand xy and puck xy from the scene latents (held-out, 5 folds)."""
+    import jax
+
+    from roll_jax.analysis import _affine_cv_r2
+
+    @jax.jit
+    def draw(keys):
+        def one(k):
+            st = env.random_placement(*jax.random.split(k))
+            return env.render(st), env.hand_pos(st)[:2], env.object_state(st)
+
+        return jax.vmap(one)(keys)
+
+    rgb, hand, puck = map(np.asarray, draw(jax.random.split(key, n)))
+    z = np.asarray(encode_scene(rgb), np.float64)
+    return {"n": n, "hand_r2": _affine_cv_r2(z, hand.astype(np.float64), 5),
+            "puck_r2": _affine_cv_r2(z, puck.astype(np.float64), 5),
+            "puck_std_cm": np.round(puck.std(0) * 100, 2).tolist()}
+
+
+def random_pushes(env, key, n: int = 256) -> dict:
+    """(c): random-policy episodes from the reset: how often the puck moves, and moves
+    towards the goal along the path."""
+    import jax
+
+    from envs_mjx.rollout import random_actions, rollout
+
+    @jax.jit
+    def run(keys):
+        def one(k):
+            k_r, k_a = jax.random.split(k)
+            s0 = env.reset(k_r)
+            _, traj = rollout(env, s0, random_actions(k_a, env.horizon, env.action_size))
+            return env.object_state(s0), traj.obj[-1]
+
+        return jax.vmap(one)(keys)
+
+    start, end = map(np.asarray, run(jax.random.split(key, n)))
+    path, goal = task_path(env.name), np.asarray(GOALS[env.name])
+    gain = path_distance(path, start, goal) - path_distance(path, end, goal)
+    moved = np.linalg.norm(end - start, axis=1)
+    return {"n": n, "hand_reset": list(env.spec.hand_reset[:2]),
+            "moved_3cm": float(np.mean(moved >= TOWARDS)),
+            "towards_goal_3cm": float(np.mean(gain >= TOWARDS)),
+            "mean_gain_cm": float(gain.mean() * 100)}
+
+
+def _centroids(images, threshold: float) -> tuple[np.ndarray, np.ndarray]:
+    """Intensity-weighted centroid (row, col) and mass of the pixels above `threshold` of
+    float images [n, H, W, 3] in [0, 1]."""
+    v = np.asarray(images, np.float64).max(-1)
+    w = np.where(v > threshold, v, 0.0)
+    mass = w.sum((1, 2))
+    rows, cols = np.mgrid[:v.shape[1], :v.shape[2]]
+    c = np.stack([(w * rows).sum((1, 2)), (w * cols).sum((1, 2))], 1) / np.maximum(mass, 1e-9)[:, None]
+    return c, mass
+
+
+def prior_goal_positions(env, cfg, pre, seg, key, n: int = 256) -> tuple[dict, np.ndarray]:
+    """(d): decoded prior goals -> where their pucks lie. Returns (summary, decoded images)."""
+    import jax
+
+    from roll_jax import encoders
+    from roll_jax.goal_encoding import Frozen, goal_encoder
+    from roll_jax.segmentation import pipeline
+
+    enc = goal_encoder(cfg)
+    goals = enc.prior_goals(key, pre.lstm.params if pre.lstm is not None else None, n)
+    decoded = np.asarray(encoders.decode(pre.object_vae.params, enc.object_cfg, goals))
+    # Reference: pucks on a 1 cm grid over the table, hand out of view, segmented as the
+    # object-VAE sees them.
+    xs, ys = np.arange(-0.2, 0.2001, 0.01), np.arange(0.45, 0.8001, 0.01)
+    grid = np.stack(np.meshgrid(xs, ys, indexing="ij"), -1).reshape(-1, 2).astype(np.float32)
+    rgb = np.asarray(_render_fn(env)(np.repeat(_hand_away(env)[None], len(grid), 0), grid))
+    frozen = Frozen(seg=seg, object_vae=pre.object_vae.params)
+    seg_rgb = np.asarray(jax.jit(enc.goal_images)(frozen, rgb)) / 255.0
+    ref_c, ref_mass = _centroids(seg_rgb, 0.1)
+    c, mass = _centroids(decoded, 0.1)
+    shown = ref_mass > 0.5 * np.median(ref_mass)
+    d = np.linalg.norm(c[:, None] - ref_c[None, shown], axis=2)
+    nearest = grid[shown][np.argmin(d, axis=1)]
+    empty = mass < 0.25 * np.median(ref_mass[shown])
+    in_region = np.zeros(n, bool)
+    for lo, hi in _region(env):
+        in_region |= np.all((nearest >= np.asarray(lo) - 0.01) & (nearest <= np.asarray(hi) + 0.01), 1)
+    goal_lo, goal_hi = np.asarray(env.spec.object_goal_low), np.asarray(env.spec.object_goal_high)
+    in_goal = np.all((nearest >= goal_lo - 0.01) & (nearest <= goal_hi + 0.01), 1)
+    full = ~empty
+    summary = {"n": n, "empty_share": float(empty.mean()),
+               "in_region_share": float(in_region[full].mean()) if full.any() else None,
+               "in_goal_space_share": float(in_goal[full].mean()) if full.any() else None,
+               "mass_vs_real_puck": float(np.median(mass) / np.median(ref_mass[shown])),
+               "puck_xy_mean": np.round(nearest[full].mean(0), 4).tolist() if full.any() else None,
+               "puck_xy_std": np.round(nearest[full].std(0), 4).tolist() if full.any() else None,
+               "puck_xy": np.round(nearest, 3).tolist()}
+    return summary, decoded
+
+
+def _region(env):
+    spec = env.spec
+    region = getattr(spec, "region", None)
+    return region if region is not None else ((spec.object_goal_low, spec.object_goal_high),)
+
+
+def write_prior_png(decoded, path: str, n: int = 32) -> None:
+    import cv2
+
+    x = (np.asarray(decoded[:n]) * 255).round().astype(np.uint8)
+    rows = [np.concatenate(list(x[i:i + 8]), 1) for i in range(0, len(x) - len(x) % 8, 8)]
+    grid = np.concatenate(rows, 0)
+    grid = cv2.resize(grid, (grid.shape[1] * 2, grid.shape[0] * 2), interpolation=cv2.INTER_NEAREST)
+    cv2.imwrite(path, grid[..., ::-1])
+
+
+def diagnose(task: str, run: str, seed: int = 0, png: str | None = None) -> dict:
+    import jax
+
+    import envs_mjx
+    from roll_jax.analysis import load_checkpoint, model_encoders
+
+    if task not in GOALS:
+        raise ValueError(f"diagnose covers the push tasks {sorted(GOALS)}, got {task!r}")
+    cfg, pre, seg = load_checkpoint(run, task)
+    env = envs_mjx.make(task)
+    encode_scene, encode_object = model_encoders(cfg, pre, seg)
+    k_b, k_c, k_d = jax.random.split(jax.random.PRNGKey(seed), 3)
+    out = {"task": task, "run": run, "seed": seed,
+           "hand_box": [list(env.spec.hand_low[:2]), list(env.spec.hand_high[:2])],
+           "path": latent_along_path(env, encode_object),
+           "scene": scene_r2(env, encode_scene, k_b),
+           "random_pushes": random_pushes(env, k_c)}
+    if pre.object_vae is not None and pre.lstm is not None:
+        out["prior_goals"], decoded = prior_goal_positions(env, cfg, pre, seg, k_d)
+        if png:
+            write_prior_png(decoded, png)
+    return out
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(prog="python -m roll_jax.diagnose", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--task", required=True, choices=sorted(GOALS), help="a push task")
+    p.add_argument("--run", required=True,
+                   help="directory with segmentation/ and encoders/ (pretrain --out or a run)")
+    p.add_argument("--out", default=None, help="JSON file to write (default: print only)")
+    p.add_argument("--png", default=None, help="PNG of 32 decoded prior goals")
+    p.add_argument("--seed", type=int, default=0, help="seed of the random draws")
+    a = p.parse_args(argv)
+    res = diagnose(a.task, a.run, a.seed, a.png)
+    brief = {k: ({kk: vv for kk, vv in v.items() if kk not in ("profile", "puck_xy")}
+                 if isinstance(v, dict) else v) for k, v in res.items()}
+    print(json.dumps(brief, indent=1))
+    if a.out:
+        os.makedirs(os.path.dirname(os.path.abspath(a.out)), exist_ok=True)
+        with open(a.out, "w") as f:
+            json.dump(res, f, indent=1)
+
+
+if __name__ == "__main__":
+    main()
