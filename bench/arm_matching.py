@@ -65,11 +65,11 @@ def train(cfg, key, a, ma, b, mb, pair_coef: float, steps: int):
     import jax
     import optax
 
-    from roll_jax import encoders, losses
-    from roll_jax.models import ConvVAE
+    from roll_jax.encoders import losses, models, steps
+    from roll_jax.encoders.models import ConvVAE
 
-    model = encoders.vae_model(cfg)
-    opt = encoders.vae_optimizer(cfg)
+    model = models.vae_model(cfg)
+    opt = steps.vae_optimizer(cfg)
     n = a.shape[0]
 
     def loss_fn(p, xa, xb, mask_a, k):
@@ -102,7 +102,7 @@ def train(cfg, key, a, ma, b, mb, pair_coef: float, steps: int):
                               step=st.step + 1), m
         return jax.lax.scan(body, state, jax.random.split(key, steps))
 
-    state, m = run(encoders.init_vae(key, cfg), jax.random.fold_in(key, 1))
+    state, m = run(steps.init_vae(key, cfg), jax.random.fold_in(key, 1))
     return state, {k: float(v[-100:].mean()) for k, v in m.items()}
 
 
@@ -110,14 +110,15 @@ def score(env, seg, params, cfg, seed: int, n: int) -> dict:
     import jax
     import numpy as np
 
-    from roll_jax import analysis, encoders
+    from roll_jax import analysis
+    from roll_jax.encoders import models, steps
     from roll_jax.segmentation import pipeline
 
     obs = analysis.observation_set(env, jax.random.PRNGKey(seed), n)
 
     def encode(rgb):
         masks = pipeline.segment(seg, rgb)
-        return np.asarray(encoders.encode_mean(params, cfg, pipeline.segmented_image(rgb, masks)),
+        return np.asarray(models.encode_mean(params, cfg, pipeline.segmented_image(rgb, masks)),
                           np.float64)
 
     mu, mu_goal = encode(obs.rgb), encode(obs.goal_rgb[None])[0]
@@ -136,8 +137,9 @@ def main(argv=None) -> None:
     import numpy as np
 
     import envs_mjx
-    from roll_jax import analysis, pretrain
-    from roll_jax.goal_encoding import goal_encoder
+    from roll_jax import analysis
+    from roll_jax.encoders import pretrain
+    from roll_jax.encoders.goal_encoding import goal_encoder
 
     p = argparse.ArgumentParser(description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)

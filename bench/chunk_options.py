@@ -35,7 +35,7 @@ SETTINGS = ("xla_defaults", "chunk_options")
 _CHILD = """
 import json, sys
 sys.path.insert(0, {root!r}); sys.path.insert(0, {here!r})
-from roll_jax import loop
+from roll_jax.training import loop
 if {setting!r} == "xla_defaults":
     loop.chunk_compiler_options = lambda: None
 import train as bench_train  # bench/train.py
@@ -67,7 +67,7 @@ def without(option: str, rounds: int) -> dict:
     import jax
     import jax.numpy as jnp
 
-    from roll_jax import compile_cache, loop, sharding
+    from roll_jax.training import compiler, loop, sharding
 
     spec = importlib.util.spec_from_file_location("bench_train", os.path.join(HERE, "train.py"))
     bench_train = importlib.util.module_from_spec(spec)  # bench/train.py, not the CLI
@@ -85,7 +85,7 @@ def without(option: str, rounds: int) -> dict:
         def make(ev, opts=opts):
             return jax.jit(sharding.over_seeds(loop.make_chunk(cfg, env, ev), 1, 1, seed_batch),
                            donate_argnums=0,
-                           compiler_options=compile_cache.accepted_options(opts))
+                           compiler_options=compiler.accepted_options(opts))
 
         progs[name] = bench_train.chunk_programs(cfg, env, frozen, new_state(), plans, make=make)
         states[name], _ = bench_train.warm_up(cfg, progs[name], new_state(), frozen, plans)

@@ -24,7 +24,7 @@ sys.path.insert(0, os.path.dirname(HERE))
 sys.path.insert(0, HERE)
 
 from common import cpu_model, write_results  # noqa: E402
-from roll_jax import compile_cache  # noqa: E402
+from roll_jax.training import compiler  # noqa: E402
 
 DEFAULT_FLAGS = ("", "--xla_backend_optimization_level=0",
                  "--xla_llvm_disable_expensive_passes=true")
@@ -38,7 +38,7 @@ def one() -> dict:
     import train as bench_train  # bench/train.py
     from configs.segmentation import segmentation_config
     from configs.train import make_config
-    from roll_jax import loop, sharding
+    from roll_jax.training import loop, sharding
 
     # The chunk's own compiler options would override the flags under test.
     loop.chunk_compiler_options = lambda: None
@@ -75,7 +75,7 @@ def main(argv=None) -> int:
     envs = {flags: dict(os.environ, XLA_FLAGS=flags, JAX_PLATFORMS="cpu", MUJOCO_GL="disable")
             for flags in a.flags}
     for flags in a.flags:  # an unknown flag fails here, not after minutes of runs
-        refusal = compile_cache.xla_flags_refusal(flags)
+        refusal = compiler.xla_flags_refusal(flags)
         if refusal:
             raise SystemExit(f"XLA_FLAGS={flags!r} is refused by XLA: {refusal}")
     results = []

@@ -34,9 +34,9 @@ import jax
 import jax.numpy as jnp
 
 from configs.encoders import lstm_config, object_vae_config, scene_vae_config
-from roll_jax import encoders
-from roll_jax.goal_encoding import GoalEncoder
-from roll_jax.models import lstm_encode
+from roll_jax.encoders import models, steps
+from roll_jax.encoders.goal_encoding import GoalEncoder
+from roll_jax.encoders.models import lstm_encode
 
 RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "encoders.json")
 TASK = "hurdle_top"
@@ -68,13 +68,13 @@ def _images(key, shape, object_like: bool):
 
 
 def bench_vae(cfg, k_steps: int, object_like: bool, key) -> dict:
-    state = encoders.init_vae(key, cfg)
+    state = steps.init_vae(key, cfg)
     data, masks = _images(key, (cfg.batch_size,) + cfg.image_shape, object_like)
 
     @functools.partial(jax.jit, donate_argnums=0)
     def run(state, key):
         def body(st, k):
-            st, m = encoders.vae_train_step(st, k, data, cfg, masks)
+            st, m = steps.vae_train_step(st, k, data, cfg, masks)
             return st, m["loss"]
         return jax.lax.scan(body, state, jax.random.split(key, k_steps))
 
@@ -86,18 +86,18 @@ def bench_vae(cfg, k_steps: int, object_like: bool, key) -> dict:
 
 
 def bench_lstm(vcfg, lcfg, batch: int, horizon: int, k_steps: int, matching: bool, key) -> dict:
-    vae = encoders.init_vae(key, vcfg)
+    vae = steps.init_vae(key, vcfg)
     images, masks = _images(key, (batch, horizon) + vcfg.image_shape, True)
-    latents = encoders.encode_mean(vae.params, vcfg, images)
-    state = encoders.init_lstm(key, lcfg, vcfg.latent_dim)
+    latents = models.encode_mean(vae.params, vcfg, images)
+    state = steps.init_lstm(key, lcfg, vcfg.latent_dim)
 
     @functools.partial(jax.jit, donate_argnums=0)
     def run(state, key):
         def body(st, k):
             k_occ, k_step = jax.random.split(k)
-            occ = (encoders.make_occlusion(k_occ, vae.params, vcfg, images, lcfg, masks)
+            occ = (steps.make_occlusion(k_occ, vae.params, vcfg, images, lcfg, masks)
                    if matching else None)
-            st, m = encoders.lstm_train_step(st, k_step, latents, lcfg, occ)
+            st, m = steps.lstm_train_step(st, k_step, latents, lcfg, occ)
             return st, m["loss"]
         return jax.lax.scan(body, state, jax.random.split(key, k_steps))
 
@@ -108,20 +108,20 @@ def bench_lstm(vcfg, lcfg, batch: int, horizon: int, k_steps: int, matching: boo
 
 
 def bench_encode(scfg, vcfg, lcfg, batch: int, key) -> dict:
-    scene = encoders.init_vae(key, scfg)
-    obj = encoders.init_vae(jax.random.fold_in(key, 1), vcfg)
-    lstm = encoders.init_lstm(key, lcfg, vcfg.latent_dim)
+    scene = steps.init_vae(key, scfg)
+    obj = steps.init_vae(jax.random.fold_in(key, 1), vcfg)
+    lstm = steps.init_lstm(key, lcfg, vcfg.latent_dim)
     enc = GoalEncoder(scfg, vcfg, segment=False, lstm=True)
     rgb, _ = _images(key, (batch,) + scfg.image_shape, False)
     seg, _ = _images(key, (batch,) + vcfg.image_shape, True)
 
-    scene_fn = jax.jit(lambda p, x: encoders.encode_mean(p, scfg, x))
-    obj_fn = jax.jit(lambda p, l, x: enc.single(l, encoders.encode_mean(p, vcfg, x)))
+    scene_fn = jax.jit(lambda p, x: models.encode_mean(p, scfg, x))
+    obj_fn = jax.jit(lambda p, l, x: enc.single(l, models.encode_mean(p, vcfg, x)))
     # the same images as 1024/50 ~ 20 trajectories through the LSTM (per-step encoding)
     t_len = 50
     n_traj = batch // t_len
     seq = seg[:n_traj * t_len].reshape((n_traj, t_len) + vcfg.image_shape)
-    seq_fn = jax.jit(lambda p, l, x: lstm_encode(l, encoders.encode_mean(p, vcfg, x)))
+    seq_fn = jax.jit(lambda p, l, x: lstm_encode(l, models.encode_mean(p, vcfg, x)))
     out = {"batch": batch}
     f, b = time_best(scene_fn, scene.params, rgb)
     out["scene_vae_images_per_s"], out["scene_vae_compile_s"] = batch / b, f

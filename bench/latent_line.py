@@ -55,12 +55,13 @@ def main(argv=None) -> dict:
 
     import envs_mjx
     from envs_mjx import scenes
-    from roll_jax import encoders, plots, pretrain, train
-    from roll_jax.goal_encoding import goal_encoder
-    from roll_jax.loop import Frozen
+    from roll_jax.encoders import models, pretrain
+    from roll_jax.training import driver, plots
+    from roll_jax.encoders.goal_encoding import goal_encoder
+    from roll_jax.training.loop import Frozen
     from roll_jax.segmentation import pipeline
 
-    cfg = train.build_config(a.task, "roll", a.preset, seeds=1, overrides=[])
+    cfg = build_config(a.task, "roll", a.preset, seeds=1, overrides=[])
     env = envs_mjx.make(a.task)
     seg, _ = pipeline.load(os.path.join(a.ckpt, "segmentation"), a.task, cfg.scene.image_shape)
     pre = pretrain.load(os.path.join(a.ckpt, "encoders"), cfg)
@@ -78,7 +79,7 @@ def main(argv=None) -> dict:
         "object-VAE latent": np.asarray(frames, np.float64),
         "goal latent (object-VAE + LSTM)": np.asarray(enc.single(pre.lstm.params, frames),
                                                       np.float64),
-        "scene latent (scene-VAE)": np.asarray(encoders.encode_mean(
+        "scene latent (scene-VAE)": np.asarray(models.encode_mean(
             pre.scene_vae.params, cfg.scene, rgb), np.float64)}
     goals = sorted({1, a.n // 4, a.n // 2, 3 * a.n // 4, a.n - 2})
     out = {"name": a.name, "task": a.task, "ckpt": os.path.abspath(a.ckpt), "x": xs.tolist(),

@@ -41,7 +41,7 @@ def summarize(rows: list[dict], target: float) -> dict:
     """Curve figures of metrics rows: median / IQR over seeds per evaluation, the area under
     the median curve (trapezoid, in metre x env steps, and as the mean distance over the run),
     the first env step where the median is <= target, the step-0 and final medians."""
-    from roll_jax.plots import seed_quantiles
+    from roll_jax.training.plots import seed_quantiles
 
     steps, med, q25, q75 = seed_quantiles(rows)
     hit = [int(s) for s, m in zip(steps, med) if m <= target]
@@ -78,19 +78,19 @@ def main(argv=None) -> dict:
 
     import jax
 
-    from roll_jax import compile_cache, run_dir, train
+    from roll_jax.training import compiler, driver, run_dir
 
-    compile_cache.use(compile_cache.default_dir())
-    cfg = train.build_config(a.task, a.algo, a.preset, seeds=a.seeds, overrides=a.set)
-    train.check_given(seg_ckpt=a.seg_ckpt, enc_ckpt=a.enc_ckpt)
+    compiler.use(compiler.default_dir())
+    cfg = build_config(a.task, a.algo, a.preset, seeds=a.seeds, overrides=a.set)
+    driver.check_given(seg_ckpt=a.seg_ckpt, enc_ckpt=a.enc_ckpt)
     resume = os.path.exists(os.path.join(out_dir, "config.json"))
     load0 = os.getloadavg()
     t0 = time.perf_counter()
-    if train.is_complete(out_dir):  # summarise the finished run (its timings.json as written)
-        train.check_resume(out_dir, cfg)
+    if run_dir.is_complete(out_dir):  # summarise the finished run (its timings.json as written)
+        run_dir.check_resume(out_dir, cfg)
         rows = run_dir.read_rows(os.path.join(out_dir, "metrics.csv"), cfg.total_env_steps, True)
     else:
-        rows = train.run(cfg, out_dir, resume=resume, seed=a.seed, seg_ckpt=a.seg_ckpt,
+        rows = driver.run(cfg, out_dir, resume=resume, seed=a.seed, seg_ckpt=a.seg_ckpt,
                          enc_ckpt=a.enc_ckpt)
     wall = time.perf_counter() - t0
     with open(os.path.join(out_dir, "timings.json")) as f:

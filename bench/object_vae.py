@@ -27,7 +27,8 @@ import numpy as np
 import envs_mjx
 from configs.encoders import VAEConfig, object_vae_config, scene_vae_config
 from configs.overrides import field_overrides
-from roll_jax import analysis, encoders
+from roll_jax import analysis
+from roll_jax.encoders import models, steps
 from roll_jax.segmentation import pipeline
 
 RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "object_vae.json")
@@ -94,12 +95,12 @@ def main() -> None:
             k_i, k_s = jax.random.split(k)
             idx = jax.random.randint(k_i, (cfg.batch_size,), 0, n_train)
             m = masks[idx] if cfg.matching_coef > 0 else None
-            return encoders.vae_train_step(st, k_s, images[idx], cfg, m)
+            return steps.vae_train_step(st, k_s, images[idx], cfg, m)
         return jax.lax.scan(body, state, jax.random.split(key, STEPS_PER_CALL))
 
     rng = np.random.default_rng(0)
     pi, pj = rng.integers(0, N_TEST, 3000), rng.integers(0, N_TEST, 3000)
-    state = encoders.init_vae(jax.random.PRNGKey(a.seed), cfg)
+    state = steps.init_vae(jax.random.PRNGKey(a.seed), cfg)
     rows = []
     for it in range(a.steps // STEPS_PER_CALL):
         state, m = train(state, jax.random.fold_in(jax.random.PRNGKey(100 + it), a.seed)
@@ -107,7 +108,7 @@ def main() -> None:
         step = (it + 1) * STEPS_PER_CALL
         if step % EVAL_EVERY:
             continue
-        mu = np.asarray(encoders.encode_mean(state.params, cfg, test_images), np.float64)
+        mu = np.asarray(models.encode_mean(state.params, cfg, test_images), np.float64)
         x = np.c_[mu, np.ones(len(mu))]
         coef, *_ = np.linalg.lstsq(x, test_xy, rcond=None)
         r2 = 1 - ((x @ coef - test_xy) ** 2).sum() / ((test_xy - test_xy.mean(0)) ** 2).sum()

@@ -79,11 +79,11 @@ def main(argv=None) -> dict:
     p.add_argument("--partial", action="store_true",
                    help="accept an unfinished run; compare up to the last evaluation both have")
     a = p.parse_args(argv)
-    from roll_jax import run_dir, train
+    from roll_jax.training import driver, run_dir
 
     runs, complete = [], {}
     for name, d in (("a", a.a), ("b", a.b)):
-        complete[name] = train.is_complete(d)
+        complete[name] = run_dir.is_complete(d)
         if not (a.partial or complete[name]):
             raise SystemExit(f"{d}: not a finished run (no {run_dir.COMPLETE_MARKER}); "
                              "--partial compares what it has")

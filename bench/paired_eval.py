@@ -37,7 +37,7 @@ def difference(a: np.ndarray, b: np.ndarray) -> dict:
 
 
 def main(argv=None) -> dict:
-    from roll_jax import evaluation
+    from roll_jax.analysis import evaluation
 
     p = argparse.ArgumentParser(description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)

@@ -53,7 +53,7 @@ def main(argv=None) -> None:
     a = p.parse_args(argv)
     if len(a.labels) != len(a.evals):
         p.error(f"{len(a.labels)} labels for {len(a.evals)} evaluations")
-    from roll_jax import plots
+    from roll_jax.training import plots
 
     try:
         evs = [read_evaluation(d, a.goals) for d in a.evals]

@@ -41,11 +41,14 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 from bench.common import machine_info, write_results  # noqa: E402
-from roll_jax import evaluation, loop, pretrain, sac  # noqa: E402
+from roll_jax.agents import sac
+from roll_jax.analysis import evaluation
+from roll_jax.encoders import pretrain
+from roll_jax.training import loop  # noqa: E402
 from roll_jax.analysis import spearman  # noqa: E402
-from roll_jax.checkpoint import read_meta  # noqa: E402
-from roll_jax.goal_encoding import goal_encoder  # noqa: E402
-from roll_jax.models import lstm_encode  # noqa: E402
+from roll_jax.common.checkpoint import read_meta  # noqa: E402
+from roll_jax.encoders.goal_encoding import goal_encoder  # noqa: E402
+from roll_jax.encoders.models import lstm_encode  # noqa: E402
 
 
 def rollouts(loaded, n_goals: int, seed: int):

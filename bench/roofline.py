@@ -62,8 +62,10 @@ import jax.numpy as jnp
 from configs.encoders import object_vae_config, scene_vae_config
 from configs.sac import SACConfig
 from configs.segmentation import SegmentationConfig
-from roll_jax import conv, encoders, sac
-from roll_jax.models import _CONV, _DECONV, _FEATURE_MAP, IMAGE_SHAPE
+from roll_jax.agents import sac
+from roll_jax.common import conv
+from roll_jax.encoders import steps
+from roll_jax.encoders.models import _CONV, _DECONV, _FEATURE_MAP, IMAGE_SHAPE
 from roll_jax.segmentation import unet
 
 RESULTS = os.path.join(ROOT, "bench", "results", "roofline.json")
@@ -146,11 +148,11 @@ def _vae_images(key, batch: int, object_like: bool):
 
 def vae_step_timer(cfg, steps: int):
     """A function that times `steps` VAE train steps in one jitted `lax.scan` (each batch drawn
-    from a pool of 4 batches, as `encoders.vae_fit_epoch` does, so nothing is constant-folded)
+    from a pool of 4 batches, as `steps.vae_fit_epoch` does, so nothing is constant-folded)
     and returns (first call s, best s per call)."""
     key = jax.random.PRNGKey(0)
     pool, pool_masks = _vae_images(key, 4 * cfg.batch_size, cfg.matching_coef > 0)
-    state = encoders.init_vae(key, cfg)
+    state = steps.init_vae(key, cfg)
 
     @jax.jit
     def run(state, key):
@@ -158,7 +160,7 @@ def vae_step_timer(cfg, steps: int):
             k_idx, k_step = jax.random.split(k)
             idx = jax.random.randint(k_idx, (cfg.batch_size,), 0, pool.shape[0])
             masks = None if pool_masks is None else pool_masks[idx]
-            return encoders.vae_train_step(st, k_step, pool[idx], cfg, masks)[0], None
+            return steps.vae_train_step(st, k_step, pool[idx], cfg, masks)[0], None
         return jax.lax.scan(body, state, jax.random.split(key, steps))[0]
 
     return lambda: time_best(run, state, key)
@@ -314,7 +316,7 @@ def sac_yardstick_timer(steps: int):
     and `loop.sac_steps` (HER sampling + update) with XLA's defaults and with the chunk's
     options."""
     from bench import sac_parts as sp
-    from roll_jax import loop
+    from roll_jax.training import loop
 
     v = sp.variants(steps)
     forms = {

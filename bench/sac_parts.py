@@ -38,8 +38,9 @@ import jax.numpy as jnp  # noqa: E402
 
 from bench.common import cpu_model, time_best, write_results  # noqa: E402
 from configs.train import make_config  # noqa: E402
-from roll_jax import loop, replay, sac  # noqa: E402
-from roll_jax.goal_encoding import goal_encoder  # noqa: E402
+from roll_jax.agents import replay, sac
+from roll_jax.training import loop  # noqa: E402
+from roll_jax.encoders.goal_encoding import goal_encoder  # noqa: E402
 
 RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "sac_parts.json")
 

@@ -68,8 +68,10 @@ import jax.numpy as jnp
 import envs_mjx
 from configs.presets import PRESETS
 from configs.train import make_config
-from roll_jax import encoders, loop, online_training, sac, sharding, skewfit
-from roll_jax.goal_encoding import Frozen, goal_encoder
+from roll_jax.agents import sac, skewfit
+from roll_jax.encoders import steps
+from roll_jax.training import loop, online, sharding
+from roll_jax.encoders.goal_encoding import Frozen, goal_encoder
 from roll_jax.segmentation import mog2, pipeline, unet
 
 RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "train.json")
@@ -166,9 +168,9 @@ def fresh_frozen_and_pretrained(cfg, key):
     bg, _ = mog2.apply_video(bg, frames, learning_rate=-1.0)
     seg = pipeline.SegParams(background=bg, unet=unet.init_unet(k_unet, scfg.unet_features, h, w),
                              robot_threshold=jnp.float32(scfg.robot_threshold))
-    scene_vae = encoders.init_vae(k_scene, cfg.scene)
-    object_vae = encoders.init_vae(k_obj, enc.object_cfg)
-    lstm = encoders.init_lstm(k_lstm, cfg.lstm, enc.frame_dim) if enc.lstm else None
+    scene_vae = steps.init_vae(k_scene, cfg.scene)
+    object_vae = steps.init_vae(k_obj, enc.object_cfg)
+    lstm = steps.init_lstm(k_lstm, cfg.lstm, enc.frame_dim) if enc.lstm else None
     return Frozen(seg=seg, object_vae=object_vae.params), scene_vae, lstm
 
 
@@ -411,8 +413,8 @@ def part_functions(cfg, env, frozen, lstm_batches: int = 0):
     def lstm_one(fz, state, key):
         if lstm_batches == 0 or state.lstm is None:
             return state.buffer.goal_latents.sum()
-        s, _ = online_training.train_lstm(cfg, enc, fz, state, key, lstm_batches)
-        return online_training.refresh_goals(enc, s).buffer.goal_latents.sum()
+        s, _ = online.train_lstm(cfg, enc, fz, state, key, lstm_batches)
+        return online.refresh_goals(enc, s).buffer.goal_latents.sum()
 
     v = jax.vmap
     return {

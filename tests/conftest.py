@@ -4,7 +4,7 @@ import os
 os.environ.setdefault("JAX_PLATFORMS", "cpu")
 os.environ.setdefault("MUJOCO_GL", "disable")
 
-from roll_jax import compile_cache  # noqa: E402  (no jax import at module level)
+from roll_jax.training import compiler  # noqa: E402  (no jax import at module level)
 
 # XLA:CPU options that cut the suite's compiles without slowing what it runs: the older
 # elemental emitters, and LLVM at -O1 instead of -O2 (bench/compile_flags.py; the figures in
@@ -18,11 +18,11 @@ def _with_fast_compile(flags: str) -> str:
     if not missing:
         return flags
     together = " ".join([flags, *missing]).strip()
-    if not compile_cache.xla_flags_refusal(together):
+    if not compiler.xla_flags_refusal(together):
         return together
     for flag in missing:  # one of them is unknown to this jaxlib: keep those it accepts
         candidate = f"{flags} {flag}".strip()
-        if not compile_cache.xla_flags_refusal(candidate):
+        if not compiler.xla_flags_refusal(candidate):
             flags = candidate
     return flags
 
@@ -54,7 +54,7 @@ def pytest_collection_modifyitems(config, items):
 
 @pytest.fixture
 def train_cli():
-    """The training command (train.py, roll-train): roll_jax/train_cli.py."""
-    from roll_jax import train_cli
+    """The training command (train.py, roll-train): roll_jax/training/cli.py."""
+    from roll_jax.training import cli
 
-    return train_cli
+    return cli

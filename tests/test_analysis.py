@@ -9,35 +9,36 @@ import jax
 import numpy as np
 import pytest
 
-from roll_jax import analysis
+from roll_jax.analysis import fig5, occlusion, stats
 
 # ----------------------------------------------------------------------------- statistics
 
 def test_rankdata_average_ties():
-    np.testing.assert_array_equal(analysis.rankdata([3.0, 1.0, 2.0, 2.0]), [4.0, 1.0, 2.5, 2.5])
-    np.testing.assert_array_equal(analysis.rankdata([5, 5, 5]), [2.0, 2.0, 2.0])
-    np.testing.assert_array_equal(analysis.rankdata([0.1, 0.3, 0.3, 0.3, -1.0]),
+    np.testing.assert_array_equal(stats.rankdata([3.0, 1.0, 2.0, 2.0]), [4.0, 1.0, 2.5, 2.5])
+    np.testing.assert_array_equal(stats.rankdata([5, 5, 5]), [2.0, 2.0, 2.0])
+    np.testing.assert_array_equal(stats.rankdata([0.1, 0.3, 0.3, 0.3, -1.0]),
                                   [2.0, 4.0, 4.0, 4.0, 1.0])
 
 
 def test_spearman_hand_computed_with_ties():
     # x ranks [1, 2.5, 2.5, 4], y ranks [1, 3, 2, 4]; centred: [-1.5, 0, 0, 1.5] and
     # [-1.5, .5, -.5, 1.5]; cov 4.5, var 4.5 and 5 -> rho = 4.5 / sqrt(22.5) = sqrt(0.9).
-    rho = analysis.spearman([1.0, 2.0, 2.0, 3.0], [10.0, 30.0, 20.0, 40.0])
+    rho = stats.spearman([1.0, 2.0, 2.0, 3.0], [10.0, 30.0, 20.0, 40.0])
     assert rho == pytest.approx(np.sqrt(0.9), abs=1e-12)
-    assert analysis.spearman([1, 2, 3, 4], [8, 4, 2, 1]) == pytest.approx(-1.0)
-    assert analysis.spearman([1, 2, 3], [1, 10, 1000]) == pytest.approx(1.0)  # monotone only
-    assert np.isnan(analysis.spearman([1, 2, 3], [7, 7, 7]))  # constant: undefined
+    assert stats.spearman([1, 2, 3, 4], [8, 4, 2, 1]) == pytest.approx(-1.0)
+    assert stats.spearman([1, 2, 3], [1, 10, 1000]) == pytest.approx(1.0)  # monotone only
+    assert np.isnan(stats.spearman([1, 2, 3], [7, 7, 7]))  # constant: undefined
     with pytest.raises(ValueError, match="same length"):
-        analysis.spearman([1, 2, 3], [1, 2])
+        stats.spearman([1, 2, 3], [1, 2])
 
 
 def test_spearman_matches_scipy_when_available():
-    stats = pytest.importorskip("scipy.stats")
+    scipy_stats = pytest.importorskip("scipy.stats")
     rng = np.random.default_rng(0)
     x = rng.integers(0, 6, 40).astype(float)  # many ties
     y = x + rng.integers(0, 4, 40)
-    assert analysis.spearman(x, y) == pytest.approx(stats.spearmanr(x, y).statistic, abs=1e-12)
+    assert stats.spearman(x, y) == pytest.approx(scipy_stats.spearmanr(x, y).statistic,
+                                                  abs=1e-12)
 
 
 # ----------------------------------------------------------------------------- Figure 5
@@ -61,13 +62,13 @@ def test_position_probe_tells_an_encoding_from_noise():
     mix = rng.normal(size=(2, 6))
     good = pos @ mix + 0.001 * rng.normal(size=(400, 6))  # a linear code of the position
     noise = rng.normal(size=(400, 6))
-    assert analysis.position_r2(good, pos) > 0.99
-    assert analysis.position_r2(noise, pos) < 0.1
-    assert analysis.pairwise_spearman(good, pos) > 0.9  # (the code is anisotropic)
-    assert abs(analysis.pairwise_spearman(noise, pos)) < 0.1
+    assert stats.position_r2(good, pos) > 0.99
+    assert stats.position_r2(noise, pos) < 0.1
+    assert stats.pairwise_spearman(good, pos) > 0.9  # (the code is anisotropic)
+    assert abs(stats.pairwise_spearman(noise, pos)) < 0.1
     # A monotone but non-linear code still ranks (Spearman) but fits worse (R^2).
     warped = np.concatenate([np.tanh(pos * 30), pos[:, :1] * 0], 1)
-    assert analysis.pairwise_spearman(warped, pos) > 0.8
+    assert stats.pairwise_spearman(warped, pos) > 0.8
 
 
 def test_nonlinear_probes_tell_a_curved_code_from_a_missing_one():
@@ -75,13 +76,13 @@ def test_nonlinear_probes_tell_a_curved_code_from_a_missing_one():
     pos = rng.uniform(-0.1, 0.1, (400, 2))
     # Each coordinate on an arc of +-2.5 rad: the whole position, but not affinely.
     curved = np.concatenate([np.cos(25 * pos), np.sin(25 * pos)], 1)
-    r2 = analysis.position_r2_nonlinear(curved, pos)
-    assert analysis.position_r2(curved, pos) < 0.9 and r2["affine_cv"] < 0.9
+    r2 = stats.position_r2_nonlinear(curved, pos)
+    assert stats.position_r2(curved, pos) < 0.9 and r2["affine_cv"] < 0.9
     assert r2["quadratic_cv"] > r2["affine_cv"] + 0.05 and r2["knn"] > 0.97
-    noise = analysis.position_r2_nonlinear(rng.normal(size=(400, 6)), pos)
+    noise = stats.position_r2_nonlinear(rng.normal(size=(400, 6)), pos)
     assert max(noise.values()) < 0.1
     with pytest.raises(ValueError, match="got 8 latents and 8 states"):
-        analysis.position_r2_nonlinear(curved[:8], pos[:8])
+        stats.position_r2_nonlinear(curved[:8], pos[:8])
 
 
 def _disc_labels(centres, radius=3.0, size=48):
@@ -97,11 +98,11 @@ def test_pixel_reference_ranks_visible_discs_and_counts_hidden_ones():
     pos = rng.uniform(10.0, 38.0, (n, 2))  # the object state: here the disc centre itself
     goal = np.array([24.0, 24.0])
     labels = _disc_labels(pos)
-    obs = analysis.ObservationSet(
+    obs = fig5.ObservationSet(
         rgb=np.zeros((n, 48, 48, 3), np.uint8), goal_rgb=np.zeros((48, 48, 3), np.uint8),
         distances=np.linalg.norm(pos - goal, axis=-1), states=pos, labels=labels,
         goal_labels=_disc_labels(goal[None])[0], goal_state=goal)
-    ref = analysis.pixel_reference(obs)
+    ref = fig5.pixel_reference(obs)
     assert ref["reference_spearman_object"] > 0.98
     assert ref["reference_r2"] > 0.99 and ref["reference_pairwise_spearman"] > 0.98
     assert ref["share_object_hidden"] == 0.0 and ref["share_object_partly_hidden"] == 0.0
@@ -112,11 +113,11 @@ def test_pixel_reference_ranks_visible_discs_and_counts_hidden_ones():
     rows = np.arange(48)[None, :, None]
     half = (rows < pos[20:50, 0, None, None]) & (covered[20:50] == 2)
     covered[20:50] = np.where(half, 1, covered[20:50])
-    hidden = analysis.pixel_reference(dataclasses.replace(obs, labels=covered))
+    hidden = fig5.pixel_reference(dataclasses.replace(obs, labels=covered))
     assert hidden["share_object_hidden"] == pytest.approx(0.1)
     assert hidden["share_object_partly_hidden"] == pytest.approx(0.15)
     assert hidden["reference_spearman_object"] < ref["reference_spearman_object"] - 0.05
-    np.testing.assert_allclose(analysis.object_visibility(covered)[:20], 0.0)
+    np.testing.assert_allclose(fig5.object_visibility(covered)[:20], 0.0)
 
     # The known-state reference: exact where nothing hides the object; with the 20 hidden
     # discs at the shown ones' mean it loses rank, but sees through the 30 half-hidden ones,
@@ -126,13 +127,13 @@ def test_pixel_reference_ranks_visible_discs_and_counts_hidden_ones():
     assert ref["known_pairwise_spearman"] == pytest.approx(1.0)
     guess = pos[20:].mean(0)
     est = np.concatenate([np.repeat(guess[None], 20, 0), pos[20:]])
-    assert hidden["known_r2"] == pytest.approx(analysis.position_r2(est, pos))
+    assert hidden["known_r2"] == pytest.approx(stats.position_r2(est, pos))
     d = np.concatenate([np.full(20, np.linalg.norm(guess - goal)), obs.distances[20:]])
-    assert hidden["known_spearman_object"] == pytest.approx(analysis.spearman(obs.distances, d))
+    assert hidden["known_spearman_object"] == pytest.approx(stats.spearman(obs.distances, d))
     assert hidden["known_spearman_object"] < 0.99
     assert hidden["known_pairwise_spearman"] > hidden["reference_pairwise_spearman"]
     with pytest.raises(ValueError, match="every one of the 200 observations hides"):
-        analysis.pixel_reference(dataclasses.replace(obs, labels=np.where(labels == 2, 1, labels)))
+        fig5.pixel_reference(dataclasses.replace(obs, labels=np.where(labels == 2, 1, labels)))
 
 
 def test_goal_mask_scores_compare_the_goal_mask_with_its_labels():
@@ -145,14 +146,14 @@ def test_goal_mask_scores_compare_the_goal_mask_with_its_labels():
     labels = np.zeros((48, 48), np.int32)
     labels[10:14, 10:14] = 2  # 16 object pixels
     labels[30:34, 5:10] = 1  # 20 robot pixels
-    obs = analysis.ObservationSet(
+    obs = fig5.ObservationSet(
         rgb=np.zeros((1, 48, 48, 3), np.uint8), goal_rgb=np.full((48, 48, 3), 90, np.uint8),
         distances=np.zeros(1), states=np.zeros((1, 2)), labels=labels[None], goal_labels=labels,
         goal_state=np.zeros(2))
-    everything = analysis.goal_mask_scores(seg.replace(robot_threshold=np.float32(2.0)), obs)
+    everything = fig5.goal_mask_scores(seg.replace(robot_threshold=np.float32(2.0)), obs)
     assert everything == {"goal_object_pixels": 16, "goal_mask_iou": round(16 / 48 ** 2, 4),
                           "goal_mask_robot_leakage": 1.0}
-    nothing = analysis.goal_mask_scores(seg.replace(robot_threshold=np.float32(-1.0)), obs)
+    nothing = fig5.goal_mask_scores(seg.replace(robot_threshold=np.float32(-1.0)), obs)
     assert nothing["goal_mask_iou"] == 0.0 and nothing["goal_mask_robot_leakage"] == 0.0
 
 
@@ -170,7 +171,7 @@ def test_latent_vs_distance_monotone_object_latent(tmp_path):
     obj_table = dirs * radius[:, None]
     scene_table = rng.normal(size=(n + 1, 4))
 
-    res = analysis.latent_vs_distance(obs, goal, dist,
+    res = fig5.latent_vs_distance(obs, goal, dist,
                                       encode_scene=lambda x: scene_table[_read_index(x)],
                                       encode_object=lambda x: obj_table[_read_index(x)])
     assert res["n"] == n
@@ -178,7 +179,7 @@ def test_latent_vs_distance_monotone_object_latent(tmp_path):
     assert abs(res["spearman_scene"]) < 0.5
     np.testing.assert_allclose(res["object_latent_distance"], radius[:n], rtol=1e-9, atol=1e-12)
 
-    png, js = analysis.write_latent_vs_distance(res, str(tmp_path), "puck_push")
+    png, js = fig5.write_latent_vs_distance(res, str(tmp_path), "puck_push")
     assert os.path.getsize(png) > 1000
     with open(png, "rb") as f:
         assert f.read(8) == b"\x89PNG\r\n\x1a\n"
@@ -212,7 +213,7 @@ def _disc_trajectories(b, t_len, rng):
 def test_occlude_frames_drops_85_percent_of_object_pixels():
     rng = np.random.default_rng(2)
     images, masks, _ = _disc_trajectories(16, 5, rng)
-    t, occ = analysis.occlude_frames(jax.random.PRNGKey(0), images, masks, drop=0.85)
+    t, occ = occlusion.occlude_frames(jax.random.PRNGKey(0), images, masks, drop=0.85)
     assert t.shape == (16,) and t.min() >= 1 and t.max() <= 4
     before = masks[np.arange(16), t].sum()
     after = (occ.any(-1) & masks[np.arange(16), t]).sum()
@@ -229,15 +230,15 @@ def test_occlusion_retrieval_perfect_encoder_has_zero_error(tmp_path):
     def read_position(x):  # the "perfect" frame encoder: the true position
         return np.asarray(x)[:, 0, :2, 0].astype(np.float64)
 
-    heads = {name: (lambda z: z) for name in analysis.OCCLUSION_MODELS}
-    res = analysis.occlusion_retrieval(jax.random.PRNGKey(1), images, masks, pos,
+    heads = {name: (lambda z: z) for name in occlusion.OCCLUSION_MODELS}
+    res = occlusion.occlusion_retrieval(jax.random.PRNGKey(1), images, masks, pos,
                                        read_position, heads)
     assert set(res["error_cm"]) == {"lstm_matching", "lstm", "vae"}
-    for name in analysis.OCCLUSION_MODELS:
+    for name in occlusion.OCCLUSION_MODELS:
         assert res["error_cm"][name] == [0.0, 0.0]
     assert res["n_queries"] == 8 and res["pool_size"] == 48 and res["chance_cm"] > 0
 
-    png, js = analysis.write_occlusion(res, str(tmp_path), "hurdle_top")
+    png, js = occlusion.write_occlusion(res, str(tmp_path), "hurdle_top")
     assert os.path.getsize(png) > 1000
     with open(js) as f:
         out = json.load(f)
@@ -246,7 +247,7 @@ def test_occlusion_retrieval_perfect_encoder_has_zero_error(tmp_path):
     assert out["median_cm"] == {"lstm_matching": 0.0, "lstm": 0.0, "vae": 0.0}
 
     # A blind encoder (a constant) retrieves an arbitrary frame: positive error.
-    res = analysis.occlusion_retrieval(jax.random.PRNGKey(1), images, masks, pos,
+    res = occlusion.occlusion_retrieval(jax.random.PRNGKey(1), images, masks, pos,
                                        lambda x: np.zeros((len(x), 2)), {"vae": lambda z: z})
     assert res["error_cm"]["vae"][0] > 0
     assert res["median_cm"]["vae"] == np.median(res["errors_cm"]["vae"])
@@ -260,11 +261,11 @@ def test_retrieval_errors_uses_history_head():
     # code_t = position at t-1 (code_0: a distinct marker): frame t itself is never read
     clean = np.concatenate([-1000.0 - pos[:, :1], pos[:, :-1]], 1)
     occ_t = np.array([1, 2, 3, 1, 2])
-    err, nn = analysis.retrieval_errors(clean, clean[np.arange(b), occ_t], pos, occ_t)
+    err, nn = occlusion.retrieval_errors(clean, clean[np.arange(b), occ_t], pos, occ_t)
     np.testing.assert_array_equal(err, 0.0)
     np.testing.assert_array_equal(nn, np.arange(b) * t_len + occ_t)
     # From the other trajectories only, the query's own frame cannot be retrieved.
-    err, nn = analysis.retrieval_errors(clean, clean[np.arange(b), occ_t], pos, occ_t,
+    err, nn = occlusion.retrieval_errors(clean, clean[np.arange(b), occ_t], pos, occ_t,
                                         exclude_own=True)
     assert np.all(nn // t_len != np.arange(b)) and np.all(err > 0)
 
@@ -272,7 +273,7 @@ def test_retrieval_errors_uses_history_head():
 def test_retrieval_from_other_trajectories_finds_the_same_position_elsewhere():
     pos = np.array([[[0.0, 0.0], [1.0, 0.0]], [[5.0, 5.0], [1.0, 0.01]], [[9.0, 9.0], [8.0, 8.0]]])
     occ_t = np.array([1, 1, 1])
-    err, nn = analysis.retrieval_errors(pos, pos[np.arange(3), occ_t], pos, occ_t,
+    err, nn = occlusion.retrieval_errors(pos, pos[np.arange(3), occ_t], pos, occ_t,
                                         exclude_own=True)
     assert nn[0] == 3 and nn[1] == 1  # each other's frame 1, 0.01 apart in the second axis
     np.testing.assert_allclose(err[:2], 0.01)
@@ -280,7 +281,7 @@ def test_retrieval_from_other_trajectories_finds_the_same_position_elsewhere():
 
 
 def test_puck_paths_stay_clear_of_the_hurdle():
-    puck, hand = analysis.puck_paths(jax.random.PRNGKey(0), "hurdle_top", 32, 50)
+    puck, hand = occlusion.puck_paths(jax.random.PRNGKey(0), "hurdle_top", 32, 50)
     assert puck.shape == hand.shape == (32, 50, 2)
     x, y = puck[..., 0], puck[..., 1]
     # free region for the puck centre (radius 4 cm) and the middle wall x in [.04, .06], y < .62
@@ -289,30 +290,30 @@ def test_puck_paths_stay_clear_of_the_hurdle():
     assert np.all(y[in_wall_band] >= 0.66 - 0.0051)
     # the puck moves and the hand touches it from behind
     assert np.all(np.linalg.norm(puck[:, -1] - puck[:, 0], axis=-1) > 0.03)
-    np.testing.assert_allclose(np.linalg.norm(puck - hand, axis=-1), analysis.HAND_BEHIND,
+    np.testing.assert_allclose(np.linalg.norm(puck - hand, axis=-1), occlusion.HAND_BEHIND,
                                rtol=1e-4)
     with pytest.raises(ValueError, match="hurdle"):
-        analysis.puck_paths(jax.random.PRNGKey(0), "door_open", 2, 5)
+        occlusion.puck_paths(jax.random.PRNGKey(0), "door_open", 2, 5)
 
 
 def test_occlusion_models_train_and_retrieve_tiny():
     """End to end on tiny shapes: untrained object-VAE, two 8-unit LSTMs trained 2 steps each
     (with / without matching loss); three finite errors."""
     from configs.encoders import LSTMConfig, object_vae_config
-    from roll_jax import encoders
+    from roll_jax.encoders import steps
 
     rng = np.random.default_rng(4)
     images, masks, pos = _disc_trajectories(4, 4, rng)
     vcfg = object_vae_config("hurdle_top")
     lcfg = LSTMConfig(hidden=8, out_dim=vcfg.latent_dim)
-    vae = encoders.init_vae(jax.random.PRNGKey(0), vcfg)
-    params, hist, snaps = analysis.train_occlusion_lstms(
+    vae = steps.init_vae(jax.random.PRNGKey(0), vcfg)
+    params, hist, snaps = occlusion.train_occlusion_lstms(
         jax.random.PRNGKey(1), vae.params, vcfg, lcfg, images, masks, n_steps=3, batch=3,
         chunk=2, snapshot_steps=(0, 1, 3))
     assert set(hist) == {"lstm_matching", "lstm"}
     assert all(h.shape == (3,) and np.all(np.isfinite(h)) for h in hist.values())
-    frame_encoder, heads = analysis.occlusion_models(vae.params, vcfg, params)
-    res = analysis.occlusion_retrieval(jax.random.PRNGKey(2), images, masks, pos,
+    frame_encoder, heads = occlusion.occlusion_models(vae.params, vcfg, params)
+    res = occlusion.occlusion_retrieval(jax.random.PRNGKey(2), images, masks, pos,
                                        frame_encoder, heads)
     assert set(res["error_cm"]) == {"lstm_matching", "lstm", "vae"}
     assert all(np.isfinite(v).all() and v[0] >= 0 for v in res["error_cm"].values())
@@ -329,20 +330,20 @@ def test_occlusion_models_train_and_retrieve_tiny():
             assert any(not np.array_equal(a, b) for a, b in zip(leaves(snaps[1][name]),
                                                                 leaves(other)))
     # The queries scored once serve every snapshot; the returned weights score as above.
-    queries = analysis.occlusion_queries(jax.random.PRNGKey(2), images, masks, frame_encoder)
-    final = analysis.score_heads(*queries, pos, analysis.occlusion_models(vae.params, vcfg,
+    queries = occlusion.occlusion_queries(jax.random.PRNGKey(2), images, masks, frame_encoder)
+    final = occlusion.score_heads(*queries, pos, occlusion.occlusion_models(vae.params, vcfg,
                                                                           snaps[3])[1])
     assert final["error_cm"] == res["error_cm"]
-    others = analysis.score_heads(*queries, pos, analysis.occlusion_models(vae.params, vcfg,
+    others = occlusion.score_heads(*queries, pos, occlusion.occlusion_models(vae.params, vcfg,
                                                                            snaps[3])[1],
                                   exclude_own=True)
-    row = analysis.curve_row(3, final, hist, others, final, window=2)
+    row = occlusion.curve_row(3, final, hist, others, final, window=2)
     assert row["lstm_steps"] == 3 and row["loss"]["lstm"] == pytest.approx(hist["lstm"][1:].mean())
     assert row["other_trajectories"]["error_cm"] == others["error_cm"]
     assert row["clean_frames"]["median_cm"] == final["median_cm"]
-    assert analysis.curve_row(0, final, hist)["loss"] == {"lstm_matching": None, "lstm": None}
+    assert occlusion.curve_row(0, final, hist)["loss"] == {"lstm_matching": None, "lstm": None}
     with pytest.raises(ValueError, match="snapshot_steps"):
-        analysis.train_occlusion_lstms(jax.random.PRNGKey(1), vae.params, vcfg, lcfg, images,
+        occlusion.train_occlusion_lstms(jax.random.PRNGKey(1), vae.params, vcfg, lcfg, images,
                                        masks, n_steps=3, batch=3, snapshot_steps=(4,))
 
 
@@ -350,14 +351,14 @@ def test_ordering_needs_each_step_separated_beyond_two_standard_errors(tmp_path)
     rng = np.random.default_rng(5)
     vae = rng.uniform(2.0, 4.0, 200)
     res = {"errors_cm": {"lstm_matching": vae - 2.0, "lstm": vae - 1.0, "vae": vae}}
-    assert analysis.ordering_holds(res)
+    assert occlusion.ordering_holds(res)
     # The auto-encoder LSTM that retrieves what the object-VAE retrieves: not separated.
     res["errors_cm"]["lstm"] = vae + rng.normal(0.0, 0.05, 200)
-    assert not analysis.ordering_holds(res)
-    diff = analysis.paired_difference(res["errors_cm"]["lstm"], vae)
+    assert not occlusion.ordering_holds(res)
+    diff = stats.paired_difference(res["errors_cm"]["lstm"], vae)
     assert abs(diff[0]) < 3 * diff[1] and diff[1] == pytest.approx(0.05 / np.sqrt(200), rel=0.2)
     curve = [{"lstm_steps": s, "error_cm": {k: [m, 0.1] for k, m in
-                                            zip(analysis.OCCLUSION_MODELS, (0.6, e, 2.4))}}
+                                            zip(occlusion.OCCLUSION_MODELS, (0.6, e, 2.4))}}
              for s, e in ((0, 0.6), (100, 0.9), (2000, 2.4))]
-    png = analysis.write_occlusion_curve(curve, str(tmp_path), "hurdle_top")
+    png = occlusion.write_occlusion_curve(curve, str(tmp_path), "hurdle_top")
     assert os.path.getsize(png) > 1000

@@ -22,7 +22,7 @@ def grid():
 
 
 def _fake_grid(base):
-    """Two runs' timings.json as roll_jax.train.run writes them (phase lists, totals)."""
+    """Two runs' timings.json as roll_jax.training.driver.run writes them (phase lists, totals)."""
     for name, chunks in (("a__roll", [10.5, 1.25]), ("b__skewfit", [8.0, 1.25])):
         d = base / "runs" / name
         d.mkdir(parents=True)

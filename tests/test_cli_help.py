@@ -61,8 +61,8 @@ def scripts() -> dict[str, str]:
 
 
 # The commands whose --help must not wait for JAX (the console script -> its module).
-LIGHT = {"roll-train": "roll_jax.train_cli", "roll-evaluate": "roll_jax.evaluate",
-         "roll-reproduce": "roll_jax.reproduce",
+LIGHT = {"roll-train": "roll_jax.training.cli", "roll-evaluate": "roll_jax.analysis.evaluate",
+         "roll-reproduce": "roll_jax.training.reproduce",
          "roll-segmentation": "roll_jax.segmentation.__main__"}
 
 
@@ -87,19 +87,19 @@ def test_help_explains_every_flag_without_jax(script):
 
 
 def test_train_help_lists_the_tasks_algorithms_and_presets():
-    out, _, _ = probe("roll_jax.train_cli", "--help")
+    out, _, _ = probe("roll_jax.training.cli", "--help")
     flat = " ".join(out.split())  # argparse wraps the help lines
     assert f"one of {', '.join(TASKS)} (default puck_push)" in flat
     assert f"one of {', '.join((*ALGOS, 'random'))} (default roll)" in flat
     assert f"one of {', '.join(PRESETS)} (configs/presets.py; default cpu)" in flat
-    out, _, _ = probe("roll_jax.reproduce", "--help")
+    out, _, _ = probe("roll_jax.training.reproduce", "--help")
     flat = " ".join(out.split())
     assert f"some of {', '.join(TASKS)}" in flat and f"some of {', '.join(ALGOS)}" in flat
     assert f"one of {', '.join(PRESETS)}" in flat
 
 
 def test_the_default_preset_is_cpu(train_cli, tmp_path):
-    from roll_jax import reproduce
+    from roll_jax.training import reproduce
     from roll_jax.segmentation import __main__ as seg_cli
 
     a, cfg, out = train_cli.parse_args(["--print-config"])
@@ -112,7 +112,7 @@ def test_print_config_prints_the_resolved_config_and_runs_nothing(tmp_path):
     run = tmp_path / "run"
     argv = ["--preset", "smoke", "--algo", "skewfit", "--seeds", "2", "--n-envs", "5", "--out",
             str(run), "--set", "total_env_steps=2000", "sac.batch_size=128", "--print-config"]
-    out, _, report = probe("roll_jax.train_cli", *argv)
+    out, _, report = probe("roll_jax.training.cli", *argv)
     assert report == {"code": 0, "heavy": [], "undocumented": []}, report
     printed = json.loads(out)
     expected = build_config("puck_push", "skewfit", "smoke", seeds=2,
@@ -125,7 +125,7 @@ def test_print_config_prints_the_resolved_config_and_runs_nothing(tmp_path):
                           text=True, timeout=120)
     assert proc.returncode == 0 and json.loads(proc.stdout) == printed, proc.stderr
     # the random-policy viewer's config too
-    out, _, report = probe("roll_jax.train_cli", "--algo", "random", "--print-config")
+    out, _, report = probe("roll_jax.training.cli", "--algo", "random", "--print-config")
     assert report["code"] == 0 and json.loads(out)["n_envs"] == 8  # the cpu preset's rollout
 
 
@@ -172,21 +172,21 @@ def test_reproduce_takes_every_algorithm_the_configs_name(tmp_path):
     """`--algos roll oracle --dry-run` once died with KeyError 'oracle'."""
     out = tmp_path / "grid"
     env = {**os.environ, "JAX_PLATFORMS": "cpu"}
-    proc = subprocess.run([sys.executable, "-m", "roll_jax.reproduce", "--algos", "roll", "oracle",
+    proc = subprocess.run([sys.executable, "-m", "roll_jax.training.reproduce", "--algos", "roll", "oracle",
                            "--dry-run", "--out", str(out)], cwd=ROOT, env=env,
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr
     planned = [line.split()[1:3] for line in proc.stdout.splitlines()]
     assert planned == [[t, v] for t in TASKS for v in ("roll", "oracle")]
     assert not out.exists()
-    _, _, report = probe("roll_jax.reproduce", "--algos", *ALGOS, "--dry-run", "--out", str(out))
+    _, _, report = probe("roll_jax.training.reproduce", "--algos", *ALGOS, "--dry-run", "--out", str(out))
     assert report["code"] == 0 and report["heavy"] == []
 
 
 def test_reproduce_runs_and_reports_an_oracle_cell(tmp_path):
     import csv
 
-    from roll_jax import reproduce, run_dir
+    from roll_jax.training import reproduce, run_dir
 
     calls = []
 

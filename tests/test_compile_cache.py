@@ -5,17 +5,17 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from roll_jax import compile_cache, loop
+from roll_jax.training import compiler, loop
 
 
 def test_accepted_options_keeps_known_and_refuses_unknown_with_a_warning():
-    opts = compile_cache.accepted_options(loop.CHUNK_CPU_COMPILER_OPTIONS)
+    opts = compiler.accepted_options(loop.CHUNK_CPU_COMPILER_OPTIONS)
     assert opts == dict(loop.CHUNK_CPU_COMPILER_OPTIONS)
     with pytest.warns(UserWarning, match="xla_no_such_option"):
-        assert compile_cache.accepted_options((("xla_no_such_option", 1),)) is None
+        assert compiler.accepted_options((("xla_no_such_option", 1),)) is None
     # one refused option costs only itself
     with pytest.warns(UserWarning, match="xla_no_such_option_either"):
-        assert compile_cache.accepted_options((("xla_backend_optimization_level", 1),
+        assert compiler.accepted_options((("xla_backend_optimization_level", 1),
                                                ("xla_no_such_option_either", 1))) == {
             "xla_backend_optimization_level": 1}
 
@@ -40,6 +40,6 @@ def test_a_program_built_with_the_chunk_options_computes_the_same():
         return jnp.tanh(a @ a.T).sum(0) + jnp.exp(-a).mean()
 
     plain = jax.jit(f)(x)
-    opts = compile_cache.accepted_options(loop.CHUNK_CPU_COMPILER_OPTIONS)
+    opts = compiler.accepted_options(loop.CHUNK_CPU_COMPILER_OPTIONS)
     built = jax.jit(f, compiler_options=opts)(x)
     np.testing.assert_allclose(np.asarray(built), np.asarray(plain), rtol=1e-6)

@@ -1,4 +1,4 @@
-"""roll_jax/conv.py against flax's nn.Conv / nn.ConvTranspose: values and gradients."""
+"""roll_jax/common/conv.py against flax's nn.Conv / nn.ConvTranspose: values and gradients."""
 import dataclasses
 
 import flax.linen as nn
@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from configs.encoders import DECODERS, scene_vae_config
-from roll_jax import conv, encoders, models
+from roll_jax.common import conv
+from roll_jax.encoders import models, steps
 
 # (input size, in channels, out channels, kernel, stride)
 # The ConvVAE's layers, plus a kernel smaller than its stride for the transposed conv (where
@@ -59,18 +60,18 @@ def test_conv_transpose_matches_flax(h, cin, cout, k, s, method):
 @pytest.mark.parametrize("decoder", ["deconv", "broadcast"])
 def test_vae_impls_share_parameters_and_values(decoder):
     fast = scene_vae_config("puck_push", decoder=decoder)
-    state = encoders.init_vae(jax.random.PRNGKey(0), fast)
+    state = steps.init_vae(jax.random.PRNGKey(0), fast)
     images = np.random.default_rng(4).integers(0, 256, (4, 48, 48, 3), dtype=np.uint8)
     z = _normal(5, (4, fast.latent_dim))
     for impl in ("lax", "matmul_patches"):
         other = dataclasses.replace(fast, conv_impl=impl)
         assert (jax.tree.structure(state.params)
-                == jax.tree.structure(encoders.init_vae(jax.random.PRNGKey(0), other).params))
-        np.testing.assert_allclose(encoders.encode_mean(state.params, fast, images),
-                                   encoders.encode_mean(state.params, other, images),
+                == jax.tree.structure(steps.init_vae(jax.random.PRNGKey(0), other).params))
+        np.testing.assert_allclose(models.encode_mean(state.params, fast, images),
+                                   models.encode_mean(state.params, other, images),
                                    rtol=1e-5, atol=1e-6)
-        np.testing.assert_allclose(encoders.decode(state.params, fast, z),
-                                   encoders.decode(state.params, other, z), rtol=1e-5, atol=1e-5)
+        np.testing.assert_allclose(models.decode(state.params, fast, z),
+                                   models.decode(state.params, other, z), rtol=1e-5, atol=1e-5)
 
 
 def test_broadcast_grid_tiles_the_latent_beside_its_coordinates():
@@ -83,7 +84,7 @@ def test_broadcast_grid_tiles_the_latent_beside_its_coordinates():
     np.testing.assert_array_equal(g[0, :, :, 3], g[0, :, :, 4].T)
     # The decoder has no dense layer of Table 3's: 6 latents + 2 coordinates feed a 3x3 conv.
     cfg = scene_vae_config("puck_push", decoder="broadcast")
-    params = encoders.init_vae(jax.random.PRNGKey(0), cfg).params["params"]
+    params = steps.init_vae(jax.random.PRNGKey(0), cfg).params["params"]
     assert "dec_fc" not in params
     assert params["broadcast_convs_0"]["kernel"].shape == (3, 3, cfg.latent_dim + 2, 32)
     assert models.DECODERS == DECODERS

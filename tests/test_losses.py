@@ -1,4 +1,4 @@
-"""Encoder losses (roll_jax.losses) and the training steps built on them (roll_jax.encoders)."""
+"""Encoder losses (roll_jax.encoders.losses) and the training steps built on them (roll_jax.encoders.steps)."""
 
 import jax
 import jax.numpy as jnp
@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from configs.encoders import OCCLUSION_SHAPES, LSTMConfig, object_vae_config
-from roll_jax import analysis, encoders, losses
-from roll_jax.models import LSTMEncoder, init_lstm_params, lstm_encode
+from roll_jax.analysis import stats
+from roll_jax.encoders import losses, models, steps
+from roll_jax.encoders.models import LSTMEncoder, init_lstm_params, lstm_encode
 
 
 def disc_images(n: int, radius: float = 6.0, background: int = 0) -> jnp.ndarray:
@@ -23,7 +24,7 @@ def disc_images(n: int, radius: float = 6.0, background: int = 0) -> jnp.ndarray
 
 
 # One compiled epoch shared by the tests below (the VAE gradient is the slowest compile here).
-FIT = jax.jit(encoders.vae_fit_epoch, static_argnames="cfg")
+FIT = jax.jit(steps.vae_fit_epoch, static_argnames="cfg")
 
 
 @pytest.fixture(scope="module")
@@ -32,7 +33,7 @@ def vae():
     # with the cpu preset's VAE matching coefficient (the paper's 400 first shrinks the
     # latents: docs/analysis.md).
     cfg = object_vae_config("puck_push", batch_size=8, batches_per_epoch=25, matching_coef=4.0)
-    return cfg, encoders.init_vae(jax.random.key(0), cfg)
+    return cfg, steps.init_vae(jax.random.key(0), cfg)
 
 
 def test_effective_beta_is_beta_over_reference_batch():
@@ -53,12 +54,12 @@ def test_vae_train_step_loss_is_the_reference_objective():
     batch and latent dims of the matching distance) / B, computed by hand."""
     b = 4
     cfg = object_vae_config("puck_push", batch_size=b, kl_reference_batch=b)
-    state = encoders.init_vae(jax.random.key(3), cfg)
+    state = steps.init_vae(jax.random.key(3), cfg)
     images = disc_images(b, radius=8.0)
     key = jax.random.key(5)
-    _, metrics = jax.jit(encoders.vae_train_step, static_argnames="cfg")(state, key, images, cfg)
+    _, metrics = jax.jit(steps.vae_train_step, static_argnames="cfg")(state, key, images, cfg)
 
-    model = encoders.vae_model(cfg)
+    model = models.vae_model(cfg)
     k_noise, k_occ = jax.random.split(key)  # as vae_train_step splits its key
     occluded = losses.occlude(k_occ, images, None, cfg.occlusion_drop)
     mean, logvar = model.apply(state.params, images, method=type(model).encode)
@@ -80,8 +81,8 @@ def test_arm_pair_term_is_the_partner_codes_distance():
     between the images' and the partners' encoder means, and nothing else."""
     b = 4
     cfg = object_vae_config("puck_push", batch_size=b)
-    state = encoders.init_vae(jax.random.key(3), cfg)
-    model = encoders.vae_model(cfg)
+    state = steps.init_vae(jax.random.key(3), cfg)
+    model = models.vae_model(cfg)
     images, partners = disc_images(b, radius=8.0), disc_images(b, radius=5.0)
     noise = jax.random.normal(jax.random.key(1), (b, cfg.latent_dim))
     base, m0 = losses.vae_loss(state.params, model, images, noise, 0.5)
@@ -102,18 +103,18 @@ def test_gradient_in_parts_equals_the_whole_batch_gradient():
     """`grad_parts` slices give the whole batch's loss, metrics and gradient (float32
     roundoff), with the matching loss on; a batch that does not split is refused."""
     cfg = object_vae_config("puck_push", batch_size=8, matching_coef=400.0)
-    state = encoders.init_vae(jax.random.key(3), cfg)
+    state = steps.init_vae(jax.random.key(3), cfg)
     images = disc_images(8, radius=8.0)
     k_noise, k_occ = jax.random.split(jax.random.key(5))
     batch = (images, jax.random.normal(k_noise, (8, cfg.latent_dim)),
              losses.occlude(k_occ, images, None, cfg.occlusion_drop))
 
     def loss_fn(p, b):
-        return losses.vae_loss(p, encoders.vae_model(cfg), b[0], b[1], cfg.effective_beta,
+        return losses.vae_loss(p, models.vae_model(cfg), b[0], b[1], cfg.effective_beta,
                                occluded=b[2], matching_coef=cfg.matching_coef)
 
-    whole = jax.jit(lambda p, b: encoders.grad_in_parts(loss_fn, p, b, 1))(state.params, batch)
-    parts = jax.jit(lambda p, b: encoders.grad_in_parts(loss_fn, p, b, 4))(state.params, batch)
+    whole = jax.jit(lambda p, b: steps.grad_in_parts(loss_fn, p, b, 1))(state.params, batch)
+    parts = jax.jit(lambda p, b: steps.grad_in_parts(loss_fn, p, b, 4))(state.params, batch)
     assert whole[1].keys() == parts[1].keys() and float(whole[1]["matching"]) > 0
     for k in whole[1]:
         np.testing.assert_allclose(float(parts[1][k]), float(whole[1][k]), rtol=1e-5, err_msg=k)
@@ -121,14 +122,14 @@ def test_gradient_in_parts_equals_the_whole_batch_gradient():
         scale = float(jnp.max(jnp.abs(a)))
         np.testing.assert_allclose(np.asarray(b), np.asarray(a), rtol=0, atol=1e-4 * scale)
     with pytest.raises(ValueError, match="batch of 8 does not split into grad_parts=3"):
-        encoders.grad_in_parts(loss_fn, state.params, batch, 3)
+        steps.grad_in_parts(loss_fn, state.params, batch, 3)
     with pytest.raises(ValueError, match="grad_parts=3 must be None or a positive divisor of "
                                          "batch_size=8"):
         object_vae_config("puck_push", batch_size=8, grad_parts=3)
     # auto: two slices on a CPU where the batch splits, the whole batch otherwise
     assert jax.default_backend() == "cpu"
-    assert encoders.grad_parts(cfg, 8) == 2 and encoders.grad_parts(cfg, 7) == 1
-    assert encoders.grad_parts(object_vae_config("puck_push", batch_size=8, grad_parts=4), 8) == 4
+    assert steps.grad_parts(cfg, 8) == 2 and steps.grad_parts(cfg, 7) == 1
+    assert steps.grad_parts(object_vae_config("puck_push", batch_size=8, grad_parts=4), 8) == 4
 
 
 def _random_discs(n: int, seed: int, radius: float = 5.0):
@@ -148,11 +149,11 @@ def _fit_discs(cfg, epochs: int = 4):
     epoch's metrics and its latent means of 256 held-out discs with their positions."""
     train, _ = _random_discs(512, 0)
     test, test_pos = _random_discs(256, 1)
-    state = encoders.init_vae(jax.random.key(0), cfg)
-    fit = jax.jit(encoders.vae_fit_epoch, static_argnames="cfg")
+    state = steps.init_vae(jax.random.key(0), cfg)
+    fit = jax.jit(steps.vae_fit_epoch, static_argnames="cfg")
     for epoch in range(epochs):
         state, m = fit(state, jax.random.key(10 + epoch), train, cfg)
-    mean = jax.jit(encoders.encode_mean, static_argnames="cfg")(state.params, cfg, test)
+    mean = jax.jit(models.encode_mean, static_argnames="cfg")(state.params, cfg, test)
     return m, np.asarray(mean), test_pos
 
 
@@ -165,7 +166,7 @@ def test_object_vae_collapses_only_with_beta_per_image(per_batch_sum):
                             kl_per_batch_sum=per_batch_sum)
     m, mean, test_pos = _fit_discs(cfg)
     kl = float(m["kl"][-20:].mean())
-    r2 = analysis.position_r2(mean, test_pos)
+    r2 = stats.position_r2(mean, test_pos)
     spread = float(np.max(np.std(mean, 0)))  # against the prior's (and posterior's) std ~1
     print(f"per_batch_sum={per_batch_sum}: KL {kl:.3f} nats, r2 {r2:.3f}, spread {spread:.3f}")
     if per_batch_sum:
@@ -181,8 +182,8 @@ def test_broadcast_decoder_lays_the_positions_out_flat():
     cfg = object_vae_config("puck_push", batch_size=32, batches_per_epoch=100, beta=5.0,
                             matching_coef=0.0, decoder="broadcast")
     _, mean, test_pos = _fit_discs(cfg)
-    r2 = analysis.position_r2(mean, test_pos)
-    rank = analysis.pairwise_spearman(mean, test_pos, max_n=len(mean))
+    r2 = stats.position_r2(mean, test_pos)
+    rank = stats.pairwise_spearman(mean, test_pos, max_n=len(mean))
     assert r2 > 0.99 and rank > 0.97, (r2, rank)
 
 
@@ -246,7 +247,7 @@ def test_empty_images_give_finite_losses(vae):
 
 def test_vae_matching_loss_zero_iff_unoccluded(vae):
     cfg, state = vae
-    model = encoders.vae_model(cfg)
+    model = models.vae_model(cfg)
     img = disc_images(8)
 
     @jax.jit
@@ -267,8 +268,8 @@ def test_vae_training_improves_reconstruction(vae):
 
     @jax.jit
     def recon_mse(params):  # deterministic reconstruction through the mean
-        mean = encoders.encode_mean(params, cfg, data)
-        return jnp.mean(jnp.square(encoders.decode(params, cfg, mean) - data / 255.0))
+        mean = models.encode_mean(params, cfg, data)
+        return jnp.mean(jnp.square(models.decode(params, cfg, mean) - data / 255.0))
 
     mean_image_mse = float(jnp.mean(jnp.square(data / 255.0 - jnp.mean(data / 255.0, 0))))
     before = float(recon_mse(state.params))
@@ -328,10 +329,10 @@ def test_lstm_training_with_occlusions(vae):
     cfg = LSTMConfig(hidden=32, batch_size=4, batches_per_epoch=30)
     frames = disc_images(8)
     images = jnp.stack([jnp.roll(frames, -i, axis=0) for i in range(4)])  # [B=4, T=8]
-    latents = encoders.encode_mean(vae_state.params, vae_cfg, images)  # [4, 8, 6]
-    state = encoders.init_lstm(jax.random.key(0), cfg, latents.shape[-1])
+    latents = models.encode_mean(vae_state.params, vae_cfg, images)  # [4, 8, 6]
+    state = steps.init_lstm(jax.random.key(0), cfg, latents.shape[-1])
 
-    occlusion = jax.jit(encoders.make_occlusion, static_argnames=("vae_cfg", "cfg"))(
+    occlusion = jax.jit(steps.make_occlusion, static_argnames=("vae_cfg", "cfg"))(
         jax.random.key(1), vae_state.params, vae_cfg, images, cfg)
     # The untrained VAE's means are ~1e-3 (its heads start at U(-1e-3, 1e-3)): unit scale, so
     # that the LSTM's losses are well above float32 noise.
@@ -342,11 +343,11 @@ def test_lstm_training_with_occlusions(vae):
     assert bool(jnp.all((occlusion.t >= cfg.min_occlusion_t) & (occlusion.t < 8)))
 
     # Pre-training (auto-encoder loss only), then online steps with the matching loss.
-    state, pre = jax.jit(encoders.lstm_fit_epoch, static_argnames="cfg")(
+    state, pre = jax.jit(steps.lstm_fit_epoch, static_argnames="cfg")(
         state, jax.random.key(2), latents, cfg)
     assert float(pre["ae"][-5:].mean()) < float(pre["ae"][:5].mean())
     assert "matching" not in pre
-    step = jax.jit(encoders.lstm_train_step, static_argnames="cfg")
+    step = jax.jit(steps.lstm_train_step, static_argnames="cfg")
     first = None
     for i in range(10):
         state, m = step(state, jax.random.key(3 + i), latents, cfg, occlusion)
@@ -354,4 +355,4 @@ def test_lstm_training_with_occlusions(vae):
     assert np.isfinite(float(m["matching"])) and float(m["loss"]) < first
     assert int(state.step) == cfg.batches_per_epoch + 10
     with pytest.raises(ValueError, match="min_occlusion_t"):
-        encoders.make_occlusion(jax.random.key(1), vae_state.params, vae_cfg, images[:, :1], cfg)
+        steps.make_occlusion(jax.random.key(1), vae_state.params, vae_cfg, images[:, :1], cfg)

@@ -1,4 +1,4 @@
-"""Encoder networks (roll_jax.models) and their configs (configs.encoders)."""
+"""Encoder networks (roll_jax.encoders.models) and their configs (configs.encoders)."""
 
 import dataclasses
 import functools
@@ -16,8 +16,8 @@ from configs.encoders import (
     object_vae_config,
     scene_vae_config,
 )
-from roll_jax import encoders
-from roll_jax.models import (
+from roll_jax.encoders import models, steps
+from roll_jax.encoders.models import (
     LSTMEncoder,
     check_images,
     init_lstm_params,
@@ -80,7 +80,7 @@ def test_conv_vae_shapes_scene_and_object():
     key = jax.random.key(0)
     x = jnp.zeros((2, 48, 48, 3), jnp.uint8)
     for cfg in (scene_vae_config("door_open"), object_vae_config("puck_push")):
-        model = encoders.vae_model(cfg)
+        model = models.vae_model(cfg)
         params = jax.eval_shape(model.init, key, x, key)  # shapes only: no compile
         assert params["params"]["feature"]["kernel"].shape == (3 * 3 * 64, cfg.feature_dim)
         recon, mean, logvar = jax.eval_shape(model.apply, params, x, key)
@@ -90,15 +90,15 @@ def test_conv_vae_shapes_scene_and_object():
 
 def test_conv_vae_runs_in_range_with_leading_dims():
     cfg = object_vae_config("hurdle_top")
-    state = encoders.init_vae(jax.random.key(0), cfg)
-    model = encoders.vae_model(cfg)
+    state = steps.init_vae(jax.random.key(0), cfg)
+    model = models.vae_model(cfg)
     x = jax.random.randint(jax.random.key(1), (2, 3, 48, 48, 3), 0, 256).astype(jnp.uint8)
 
     @jax.jit  # one compile for the whole check
     def run(params, x, key):
         recon, mean, logvar = model.apply(params, x, key)
-        return (recon, mean, logvar, encoders.encode_mean(params, cfg, x),
-                encoders.decode(params, cfg, mean))
+        return (recon, mean, logvar, models.encode_mean(params, cfg, x),
+                models.decode(params, cfg, mean))
 
     recon, mean, logvar, enc_mean, dec = run(state.params, x, jax.random.key(2))
     assert recon.shape == dec.shape == (2, 3, 48, 48, 3) and mean.shape == (2, 3, 6)
@@ -116,21 +116,21 @@ def test_image_checks():
     with pytest.raises(ValueError, match="int32"):
         check_images(jnp.zeros((2, 48, 48, 3), jnp.int32))
     cfg = object_vae_config("pickup", batch_size=2)
-    state = jax.eval_shape(functools.partial(encoders.init_vae, cfg=cfg), jax.random.key(0))
+    state = jax.eval_shape(functools.partial(steps.init_vae, cfg=cfg), jax.random.key(0))
     with pytest.raises(ValueError, match="shape"):
-        encoders.vae_train_step(state, jax.random.key(0), jnp.zeros((2, 48, 48), jnp.uint8), cfg)
+        steps.vae_train_step(state, jax.random.key(0), jnp.zeros((2, 48, 48), jnp.uint8), cfg)
     with pytest.raises(ValueError, match="object_masks"):
-        encoders.vae_train_step(state, jax.random.key(0), jnp.zeros((2, 48, 48, 3), jnp.uint8),
+        steps.vae_train_step(state, jax.random.key(0), jnp.zeros((2, 48, 48, 3), jnp.uint8),
                                 cfg, object_masks=jnp.zeros((2, 48, 48, 3), bool))
     # Arm-pair partners come with arm_pair_coef > 0, in the images' shape.
     images = jnp.zeros((2, 48, 48, 3), jnp.uint8)
     with pytest.raises(ValueError, match="partner images go with arm_pair_coef > 0"):
-        encoders.vae_train_step(state, jax.random.key(0), images, cfg, partners=images)
+        steps.vae_train_step(state, jax.random.key(0), images, cfg, partners=images)
     paired = dataclasses.replace(cfg, arm_pair_coef=1.0)
     with pytest.raises(ValueError, match="partner images go with arm_pair_coef > 0"):
-        encoders.vae_train_step(state, jax.random.key(0), images, paired)
+        steps.vae_train_step(state, jax.random.key(0), images, paired)
     with pytest.raises(ValueError, match=r"partners must have the images' shape \(2, 48, 48, 3\)"):
-        encoders.vae_train_step(state, jax.random.key(0), images, paired, partners=images[:1])
+        steps.vae_train_step(state, jax.random.key(0), images, paired, partners=images[:1])
     with pytest.raises(ValueError, match="arm_pair_coef must be >= 0, got -1.0"):
         object_vae_config("pickup", arm_pair_coef=-1.0)
 
@@ -151,7 +151,7 @@ def test_lstm_shapes(lstm):
     assert lstm_encode(params, jnp.stack([seq, seq]), model=model).shape == (2, 5, 3)
     assert LSTMEncoder.from_params(params) == model
     cfg = lstm_config("puck_push")
-    state = jax.eval_shape(functools.partial(encoders.init_lstm, cfg=cfg, in_dim=6),
+    state = jax.eval_shape(functools.partial(steps.init_lstm, cfg=cfg, in_dim=6),
                            jax.random.key(0))
     assert jax.eval_shape(lstm_encode, state.params, jnp.zeros((7, 6))).shape == (7, cfg.out_dim)
 
@@ -161,8 +161,8 @@ def test_lstm_init_vmaps_over_seeds():
     # (Regression: flax's orthogonal LSTM init deadlocked XLA:CPU under jit(vmap).)
     cfg = lstm_config("pickup")
     keys = jax.random.split(jax.random.key(0), 2)
-    batched = jax.jit(jax.vmap(lambda k: encoders.init_lstm(k, cfg, 6)))(keys)
-    single = encoders.init_lstm(keys[1], cfg, 6)
+    batched = jax.jit(jax.vmap(lambda k: steps.init_lstm(k, cfg, 6)))(keys)
+    single = steps.init_lstm(keys[1], cfg, 6)
     for a, b in zip(jax.tree.leaves(batched), jax.tree.leaves(single)):
         np.testing.assert_array_equal(a[1], b)
 

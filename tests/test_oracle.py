@@ -6,8 +6,9 @@ import pytest
 
 import envs_mjx
 from configs.train import make_config
-from roll_jax import loop, pretrain
-from roll_jax.goal_encoding import Frozen, goal_encoder
+from roll_jax.encoders import pretrain
+from roll_jax.training import loop
+from roll_jax.encoders.goal_encoding import Frozen, goal_encoder
 
 
 @pytest.fixture(scope="module")

@@ -72,7 +72,9 @@ def test_unknown_preset_names_the_known_ones():
 
 
 def test_every_cli_takes_preset_cpu_and_lists_the_presets(train_cli, tmp_path, capsys):
-    from roll_jax import analysis, pretrain, reproduce
+    from roll_jax.analysis import __main__ as analysis_cli
+    from roll_jax.encoders import pretrain
+    from roll_jax.training import reproduce
     from roll_jax.segmentation import __main__ as seg_cli
 
     _, cfg, _ = train_cli.parse_args(["--preset", "cpu", "--devices", "1",
@@ -87,7 +89,7 @@ def test_every_cli_takes_preset_cpu_and_lists_the_presets(train_cli, tmp_path, c
                                                                     "--out", str(tmp_path)]),
                        (reproduce.main, ["--out", str(tmp_path)]),
                        (seg_cli.main, ["--task", "puck_push", "--out", str(tmp_path)]),
-                       (analysis.main, ["latent-vs-distance", "--task", "puck_push",
+                       (analysis_cli.main, ["latent-vs-distance", "--task", "puck_push",
                                         "--ckpt", str(tmp_path)])):
         capsys.readouterr()
         with pytest.raises(SystemExit):
@@ -104,7 +106,8 @@ def test_cpu_preset_trains_only_skewfits_scene_vae_online():
 
 
 def test_pretrain_overrides_reach_the_analysis_config(tmp_path):
-    from roll_jax import analysis, pretrain
+    from roll_jax.analysis import checkpoints
+    from roll_jax.encoders import pretrain
 
     with pytest.raises(SystemExit, match="occlusion_shap"):
         pretrain.main(["--task", "puck_push", "--preset", "cpu", "--out", str(tmp_path),
@@ -113,8 +116,8 @@ def test_pretrain_overrides_reach_the_analysis_config(tmp_path):
         json.dump({"task": "hurdle_top", "preset": "cpu",
                    "overrides": ["object_vae.occlusion_shape=edge",
                                  "object_vae.matching_coef=0.0"]}, f)
-    cfg = analysis.checkpoint_config(str(tmp_path), "hurdle_top")
+    cfg = checkpoints.checkpoint_config(str(tmp_path), "hurdle_top")
     assert cfg.preset == "cpu"
     assert cfg.object_vae.occlusion_shape == "edge" and cfg.object_vae.matching_coef == 0.0
     with pytest.raises(ValueError, match="hurdle_top"):
-        analysis.checkpoint_config(str(tmp_path), "puck_push")
+        checkpoints.checkpoint_config(str(tmp_path), "puck_push")

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from configs.train import make_config
-from roll_jax import pretrain
+from roll_jax.encoders import pretrain
 
 
 def tiny(arm_pair_coef=0.0, **flags):

@@ -5,7 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from roll_jax import replay, skewfit
+from roll_jax.agents import replay, skewfit
 
 CAP, T, HW, A, DS, DG = 6, 5, 8, 2, 3, 2
 FRACS = (0.2, 0.5, 0.3)

@@ -8,11 +8,11 @@ import os
 import numpy as np
 import pytest
 
-from roll_jax import reproduce, run_dir, train
+from roll_jax.training import driver, reproduce, run_dir
 
 
 class FakeRun:
-    """Stands in for train.run: records calls, writes what a finished run leaves."""
+    """Stands in for driver.run: records calls, writes what a finished run leaves."""
 
     def __init__(self):
         self.calls = []
@@ -25,7 +25,7 @@ class FakeRun:
             json.dump(run_dir.config_json(cfg), f)
         run_dir.write_inputs(out, seg_ckpt, None, seed)
         _write_metrics(out, {1000: [0.5] * cfg.seeds})
-        with open(os.path.join(out, train.COMPLETE_MARKER), "w") as f:
+        with open(os.path.join(out, run_dir.COMPLETE_MARKER), "w") as f:
             f.write("{}")
         return []
 
@@ -88,7 +88,7 @@ def test_refuses_dir_of_other_config(tmp_path, capsys):
     the whole grid is refused before anything runs."""
     fake = FakeRun()
     out = tmp_path / "grid"
-    cfg3 = train.build_config("puck_push", "skewfit", "smoke", seeds=3)
+    cfg3 = build_config("puck_push", "skewfit", "smoke", seeds=3)
     FakeRun()(cfg3, reproduce.run_dir(str(out), "puck_push", "skewfit"))
     before = (out / "runs/puck_push__skewfit/config.json").read_text()
     with pytest.raises(SystemExit):
@@ -169,7 +169,7 @@ def test_figures_and_table_from_metrics(tmp_path):
     for (task, variant), v in vals.items():
         _write_metrics(reproduce.run_dir(str(out), task, variant), v)
     with open(os.path.join(reproduce.run_dir(str(out), "puck_push", "roll"),
-                           train.COMPLETE_MARKER), "w") as f:
+                           run_dir.COMPLETE_MARKER), "w") as f:
         f.write("{}")
     fake = FakeRun()
     assert reproduce.main(_args(out, "--tasks", "puck_push", "hurdle_top", "--ablations",
@@ -219,7 +219,7 @@ def test_parallel_jobs_fit_each_segmentation_once_before_its_other_cells(tmp_pat
     import threading
     import time as _time
 
-    from roll_jax.goal_encoding import goal_encoder
+    from roll_jax.encoders.goal_encoding import goal_encoder
 
     events, lock = [], threading.Lock()
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from configs.sac import SACConfig
-from roll_jax import sac
+from roll_jax.agents import sac
 
 OBS, GOAL, ACT = 3, 2, 2
 SMALL = SACConfig(hidden=(32, 32), batch_size=64, policy_lr=3e-3, q_lr=3e-3, alpha_lr=3e-3)

@@ -30,7 +30,7 @@ import textwrap
 import numpy as np
 import pytest
 
-from roll_jax import sharding
+from roll_jax.training import sharding
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -44,7 +44,8 @@ SCRIPT = textwrap.dedent("""
     from jax.sharding import PartitionSpec as P
     from configs.segmentation import segmentation_config
     from configs.train import make_config
-    from roll_jax import loop, pretrain, sharding, train
+    from roll_jax.encoders import pretrain
+    from roll_jax.training import driver, loop, sharding
     from roll_jax.segmentation import pipeline
 
     assert jax.device_count() == 2, jax.devices()
@@ -116,12 +117,12 @@ SCRIPT = textwrap.dedent("""
     for name, devices in (("sharded", "all"), ("single", 1)):
         d = os.path.join(base, name)
         t0 = time.time()
-        rows = train.run(cfg, d, progress=False, devices=devices, **given)
+        rows = driver.run(cfg, d, progress=False, devices=devices, **given)
         ck = ocp.StandardCheckpointer()
         state = ck.restore(os.path.abspath(os.path.join(d, "ckpt", "1", "default")))
         ck.close()
         np.savez(os.path.join(base, name + ".npz"), **{k: np.asarray(v) for k, v in state.items()})
-        with open(os.path.join(d, train.COMPLETE_MARKER)) as fh:
+        with open(os.path.join(d, run_dir.COMPLETE_MARKER)) as fh:
             marker = json.load(fh)
         out[name] = {"rows": rows, "seen": seen[-1], "marker": marker,
                      "wall_s": round(time.time() - t0, 1)}
@@ -137,7 +138,7 @@ SCRIPT = textwrap.dedent("""
     # Each finished run resumed on the other device count: its checkpoint restores there
     # (nothing left to train: no chunk is compiled).
     report["cross_resume"] = {
-        name: train.run(cfg, os.path.join(base, name), resume=True, progress=False,
+        name: driver.run(cfg, os.path.join(base, name), resume=True, progress=False,
                         devices=devices, **given)
         for name, devices in (("sharded", 1), ("single", "all"))}
     print("REPORT " + json.dumps(report))
@@ -275,7 +276,7 @@ def test_resolve_single_process():
 
 
 def test_cli_checks_devices_before_compiling(tmp_path, capsys):
-    from roll_jax import train_cli as cli
+    from roll_jax.training import cli
 
     out = str(tmp_path / "run")
     with pytest.raises(SystemExit):

@@ -14,9 +14,11 @@ from scipy import stats
 
 from configs.encoders import VAEConfig
 from configs.train import make_config
-from roll_jax import encoders, loop, losses, online_training, replay, skewfit
-from roll_jax.goal_encoding import Frozen, GoalEncoder, goal_encoder
-from roll_jax.checkpoint import write_meta
+from roll_jax.agents import replay, skewfit
+from roll_jax.encoders import losses, models, steps
+from roll_jax.training import loop, online
+from roll_jax.encoders.goal_encoding import Frozen, GoalEncoder, goal_encoder
+from roll_jax.common.checkpoint import write_meta
 
 CAP, T, HW, A, DG = 5, 3, 4, 2, 2
 T1 = T + 1
@@ -185,8 +187,8 @@ def data():
     blob = np.zeros((48, 48), bool)
     blob[10:20, 12:24] = True  # the "object" of the segmented images
     seg = jnp.where(jnp.asarray(blob)[..., None], rgb, 0).astype(jnp.uint8)
-    return {"object": encoders.init_vae(k_o, cfg.object_vae).params,
-            "scene": encoders.init_vae(k_s, cfg.scene).params, "rgb": rgb, "seg": seg}
+    return {"object": steps.init_vae(k_o, cfg.object_vae).params,
+            "scene": steps.init_vae(k_s, cfg.scene).params, "rgb": rgb, "seg": seg}
 
 
 def _norms(tree):
@@ -199,8 +201,8 @@ def _lstm_loss(cfg, enc, lstm_params, vae_params, images):
     lstm_train_step's loss), differentiable in the LSTM and in the frame encoder's parameters."""
     frozen = Frozen(seg=None, object_vae=vae_params if enc.object_cfg is not None else None)
     lat = enc.frame_latents(frozen, vae_params, images)  # the buffer's cached latents
-    occ = online_training.online_occlusion(cfg, enc, frozen, vae_params, jax.random.PRNGKey(5), images)
-    return losses.lstm_loss(lstm_params, encoders.lstm_model(cfg.lstm), lat,
+    occ = online.online_occlusion(cfg, enc, frozen, vae_params, jax.random.PRNGKey(5), images)
+    return losses.lstm_loss(lstm_params, models.lstm_model(cfg.lstm), lat,
                             None if occ is None else occ.latent, None if occ is None else occ.t,
                             matching_coef=cfg.lstm.matching_coef, ae_coef=cfg.lstm.ae_coef,
                             one_sided=cfg.lstm.matching_one_sided)
@@ -229,7 +231,7 @@ def test_ablation_changes_exactly_its_part(variant, data):
         assert enc.sequence(None, x) is x and enc.goal_dim == obj_latent
         return
     assert any(loop.plan_chunk(cfg, e).lstm_batches > 0 for e in range(4))
-    lstm = encoders.init_lstm(jax.random.PRNGKey(1), cfg.lstm, enc.frame_dim)
+    lstm = steps.init_lstm(jax.random.PRNGKey(1), cfg.lstm, enc.frame_dim)
     for gate in ("ii", "if", "ig", "io"):  # input kernels of the first cell: [frame_dim, hidden]
         assert lstm.params["params"]["cells_0"][gate]["kernel"].shape[0] == enc.frame_dim
     vae_params = data["object"] if enc.object_cfg is not None else data["scene"]
@@ -259,7 +261,7 @@ def test_object_vae_matching_gradient(variant, data):
     imgs = data["seg"][0]
     occ = losses.occlude(jax.random.PRNGKey(2), imgs, None, ocfg.occlusion_drop)
     grad = jax.jit(jax.grad(lambda p, c: c * losses.vae_matching_loss(
-        p, encoders.vae_model(ocfg), imgs, occ, ocfg.matching_one_sided)))
+        p, models.vae_model(ocfg), imgs, occ, ocfg.matching_one_sided)))
     norms = _norms(grad(data["object"], ocfg.matching_coef))
     means = [k for k in norms if k.startswith("convs_") or k in ("feature", "mean_head")]
     if variant == "roll":  # the encoder-mean path only: the loss compares means
@@ -267,8 +269,8 @@ def test_object_vae_matching_gradient(variant, data):
         assert all(norms[k] == 0 for k in norms if k not in means)
     else:
         assert all(v == 0 for v in norms.values())
-    _, m = jax.jit(encoders.vae_train_step, static_argnames="cfg")(
-        encoders.ModelState(data["object"], encoders.vae_optimizer(ocfg).init(data["object"]),
+    _, m = jax.jit(steps.vae_train_step, static_argnames="cfg")(
+        steps.ModelState(data["object"], steps.vae_optimizer(ocfg).init(data["object"]),
                           jnp.int32(0)), jax.random.PRNGKey(3), imgs, cfg=ocfg)
     assert ("matching" in m) == (variant == "roll")
 
@@ -294,7 +296,7 @@ def test_no_object_vae_lstm_reconstructs_scene_latents_on_every_task():
 
 
 def test_encoder_checkpoint_of_full_roll_is_refused_by_the_matching_ablation(tmp_path):
-    from roll_jax import pretrain
+    from roll_jax.encoders import pretrain
 
     full = make_config("hurdle_top", "roll", "smoke")
     ablated = make_config("hurdle_top", "roll", "smoke", matching_loss=False)
@@ -305,8 +307,8 @@ def test_encoder_checkpoint_of_full_roll_is_refused_by_the_matching_ablation(tmp
 
 
 def test_encoder_checkpoint_of_another_decoder_is_refused(tmp_path):
-    from roll_jax import pretrain
-    from roll_jax.train import build_config
+    from roll_jax.encoders import pretrain
+    from roll_jax.training.driver import build_config
 
     table3 = build_config("puck_push", "roll", "smoke")
     broadcast = build_config("puck_push", "roll", "smoke",
@@ -323,7 +325,7 @@ def test_encoder_checkpoint_of_another_decoder_is_refused(tmp_path):
 
 
 def test_encoder_checkpoint_of_the_old_kl_scaling_is_refused(tmp_path):
-    from roll_jax import pretrain
+    from roll_jax.encoders import pretrain
 
     cfg = make_config("puck_push", "roll", "smoke")
     old = {**pretrain._meta(cfg), "version": 1}
@@ -337,14 +339,14 @@ def test_log_likelihood_is_the_reference_estimator():
     samples z = mu + sigma eps of log N(z; 0, I) - log N(z; mu, sigma) - SSE(clip(dec(z)), x)
     / (2e), constants dropped; images that decode worse get a lower log p."""
     cfg = make_config("puck_push", "skewfit", "smoke")
-    params = encoders.init_vae(jax.random.PRNGKey(0), cfg.scene).params
+    params = steps.init_vae(jax.random.PRNGKey(0), cfg.scene).params
     rng = np.random.default_rng(0)
     images = jnp.asarray(rng.integers(0, 256, (3, 48, 48, 3)), jnp.uint8)
     images = images.at[0].set(0)  # a black image: nearest to the untrained decoder's output
     key = jax.random.PRNGKey(3)
     got = np.asarray(skewfit.log_likelihood(cfg, params, images, key))
-    model = encoders.vae_model(cfg.scene)
-    from roll_jax.models import ConvVAE
+    model = models.vae_model(cfg.scene)
+    from roll_jax.encoders.models import ConvVAE
 
     mu, logvar = (np.asarray(a, np.float64) for a in model.apply(params, images,
                                                                  method=ConvVAE.encode))
@@ -364,7 +366,7 @@ def test_online_scene_vae_round_recomputes_log_p_of_the_filled_episodes_only():
     """After a scene-VAE round, skew_log_p holds frame_log_p of every filled episode under the
     trained VAE (one key per episode, `replay.map_filled`) and keeps the unfilled slots."""
     cfg = make_config("puck_push", "skewfit", "smoke")
-    vae = encoders.init_vae(jax.random.PRNGKey(0), cfg.scene)
+    vae = steps.init_vae(jax.random.PRNGKey(0), cfg.scene)
     cap, t = 4, 2
     buf = replay.init_buffer(cap, t, (48, 48, 3), A, cfg.scene.latent_dim, cfg.scene.latent_dim)
     rng = np.random.default_rng(1)
@@ -375,7 +377,7 @@ def test_online_scene_vae_round_recomputes_log_p_of_the_filled_episodes_only():
                             test_start=None, last_train={}, key=None, env_steps=None,
                             epoch=jnp.int32(1), eval_key=None)
     key = jax.random.PRNGKey(2)
-    new, _ = jax.jit(lambda s: online_training.train_scene_vae(cfg, s, key, 2))(state)
+    new, _ = jax.jit(lambda s: online.train_scene_vae(cfg, s, key, 2))(state)
     keys = jax.random.split(jax.random.split(key)[0], cap)  # train_scene_vae's k_lp
     for i in range(3):
         np.testing.assert_allclose(
@@ -389,7 +391,7 @@ def test_single_achieved_encoding_is_the_goal_images_function_frame_by_frame():
     one = goal_encoder(make_config("puck_push", "roll", "smoke", achieved_encoding="single"))
     assert not seq.achieved_single and one.achieved_single
     cfg = make_config("puck_push", "roll", "smoke")
-    lstm = encoders.init_lstm(jax.random.PRNGKey(1), cfg.lstm, seq.frame_dim)
+    lstm = steps.init_lstm(jax.random.PRNGKey(1), cfg.lstm, seq.frame_dim)
     x = jax.random.normal(jax.random.PRNGKey(2), (TT, seq.frame_dim))
     single = one.achieved(lstm.params, x)
     # frame t alone, one step from the zero state: what a goal image of that frame gets

@@ -12,7 +12,7 @@ import pytest
 from configs.sac import SACConfig
 from configs.segmentation import segmentation_config
 from configs.train import make_config
-from roll_jax import loop, run_dir, sharding, train
+from roll_jax.training import driver, loop, run_dir, sharding
 
 
 def tiny(**kw):
@@ -27,13 +27,13 @@ def runs(tmp_path_factory):
     cfg = tiny()
     full = str(base / "full")
     loop.TRACE_COUNTS.clear()
-    rows = train.run(cfg, full, progress=False)
+    rows = driver.run(cfg, full, progress=False)
     traces = loop.TRACE_COUNTS["chunk"]
     shared = {"seg_ckpt": os.path.join(full, "segmentation"),
                   "enc_ckpt": os.path.join(full, "encoders"), "progress": False}
     part = str(base / "part")
-    train.run(cfg, part, stop_after_epochs=1, **shared)
-    resumed = train.run(cfg, part, resume=True, **shared)
+    driver.run(cfg, part, stop_after_epochs=1, **shared)
+    resumed = driver.run(cfg, part, resume=True, **shared)
     return cfg, full, rows, part, resumed, traces
 
 
@@ -104,15 +104,15 @@ def test_resume_continues_exactly(runs):
 def test_resume_refuses_other_config(runs, tmp_path):
     _, full, *_ = runs
     with pytest.raises(ValueError, match="differs from the command line in 'n_eval_goals'"):
-        train.check_resume(full, tiny(n_eval_goals=3))
+        run_dir.check_resume(full, tiny(n_eval_goals=3))
     with pytest.raises(ValueError, match="no run to resume"):
-        train.check_resume(str(tmp_path), tiny())
+        run_dir.check_resume(str(tmp_path), tiny())
     # The base seed is a run's input too (inputs.json); unknown (None) is not checked.
-    train.check_resume(full, tiny(), seed=0)
-    train.check_resume(full, tiny(), seed=None)
+    run_dir.check_resume(full, tiny(), seed=0)
+    run_dir.check_resume(full, tiny(), seed=None)
     with pytest.raises(ValueError, match="was trained with --seed 0, the command line gives "
                                          "--seed 3"):
-        train.check_resume(full, tiny(), seed=3)
+        run_dir.check_resume(full, tiny(), seed=3)
 
 
 def test_resume_accepts_a_run_written_before_a_field_existed(tmp_path):
@@ -123,12 +123,12 @@ def test_resume_accepts_a_run_written_before_a_field_existed(tmp_path):
     del saved["object_vae"]["occlusion_shape"]  # a run written before the field was added
     with open(tmp_path / "config.json", "w") as f:
         json.dump(saved, f)
-    train.check_resume(str(tmp_path), cfg)  # the default is the old behaviour: same run
-    train.check_resume(str(tmp_path), cfg, seed=5)  # no inputs.json: its seed is unknown
+    run_dir.check_resume(str(tmp_path), cfg)  # the default is the old behaviour: same run
+    run_dir.check_resume(str(tmp_path), cfg, seed=5)  # no inputs.json: its seed is unknown
     other = dataclasses.replace(cfg, object_vae=dataclasses.replace(cfg.object_vae,
                                                                     occlusion_shape="edge"))
     with pytest.raises(ValueError, match="differs from the command line in 'object_vae'"):
-        train.check_resume(str(tmp_path), other)
+        run_dir.check_resume(str(tmp_path), other)
 
 def test_equal_keys_give_equal_seeds(runs):
     """Two seeds with the same key stay identical through a chunk (no cross-seed leakage
@@ -137,11 +137,11 @@ def test_equal_keys_give_equal_seeds(runs):
     import envs_mjx
 
     env = envs_mjx.make(cfg.task)
-    frozen, pre = train.setup(cfg, env, jax.random.PRNGKey(0), full, progress=False)
+    frozen, pre = driver.setup(cfg, env, jax.random.PRNGKey(0), full, progress=False)
     key = jax.random.PRNGKey(7)
-    # Built as train.init_seeds builds it, so the chunk's input types are the run's and its
+    # Built as driver.init_seeds builds it, so the chunk's input types are the run's and its
     # compiled program comes from the persistent cache instead of a second compile.
-    state = train.init_states(cfg, env, jax.numpy.stack([key, key]), pre)
+    state = driver.init_states(cfg, env, jax.numpy.stack([key, key]), pre)
     chunk = loop.compile_chunk(cfg, env, 1, sharding.resolve_seed_batch("auto", cfg.seeds))
     state, m = chunk(state, frozen, loop.plan_chunk(cfg, 0))
     for leaf in jax.tree.leaves((state.sac, m)):
@@ -152,7 +152,7 @@ def test_reproduce_trains_a_real_cell(runs, tmp_path):
     """The grid's real path (no fake run function): the fixture's tiny config as a one-cell
     grid through `reproduce.main`. Its segmentation and pre-training go through the grid's
     shared dirs, and it gives the fixture's run's metrics exactly (same seed)."""
-    from roll_jax import reproduce
+    from roll_jax.training import reproduce
 
     _cfg, _full, rows, *_ = runs
     out = tmp_path / "grid"
@@ -226,16 +226,16 @@ def test_read_rows_keeps_int_columns(tmp_path):
 def test_check_finite_stops_on_a_nan_gradient_with_finite_losses():
     ok = {"q_loss": np.array([0.1, 0.2]), "policy_loss": np.array([1.0, 1.0]),
           "finite": np.array([1.0, 1.0])}
-    train.check_finite(ok, 500, 0, "/ckpt")
+    driver.check_finite(ok, 500, 0, "/ckpt")
     bad_grad = {**ok, "finite": np.array([1.0, 0.999])}  # one update of seed 1 out of 1000
-    with pytest.raises(train.TrainingDiverged, match="SAC gradient was NaN/inf for seed 1 at "
+    with pytest.raises(driver.TrainingDiverged, match="SAC gradient was NaN/inf for seed 1 at "
                                                      "env step 500 .* /ckpt is kept"):
-        train.check_finite(bad_grad, 500, 0, "/ckpt")
-    with pytest.raises(train.TrainingDiverged, match="q_loss is nan for seed 0 at env step 1000"):
-        train.check_finite({**ok, "q_loss": np.array([np.nan, 0.1])}, 1000, 1, "/ckpt")
+        driver.check_finite(bad_grad, 500, 0, "/ckpt")
+    with pytest.raises(driver.TrainingDiverged, match="q_loss is nan for seed 0 at env step 1000"):
+        driver.check_finite({**ok, "q_loss": np.array([np.nan, 0.1])}, 1000, 1, "/ckpt")
 
 
-# --- python -m roll_jax.evaluate on the run's checkpoint ---------------------------------------
+# --- python -m roll_jax.analysis.evaluate on the run's checkpoint ---------------------------------------
 
 def _tree_snapshot(root):
     return sorted((os.path.relpath(os.path.join(d, f), root), os.path.getmtime(os.path.join(d, f)),
@@ -246,7 +246,7 @@ def _tree_snapshot(root):
 def test_evaluate_writes_outputs_and_is_deterministic(runs, tmp_path):
     from PIL import Image
 
-    from roll_jax import evaluate, evaluation
+    from roll_jax.analysis import evaluate, evaluation
 
     _cfg, full, *_ = runs
     before = _tree_snapshot(full)
@@ -278,7 +278,7 @@ def test_evaluate_refuses_bad_input(runs, tmp_path, capsys):
 
     from PIL import Image
 
-    from roll_jax import evaluate, evaluation
+    from roll_jax.analysis import evaluate, evaluation
 
     _cfg, full, *_ = runs
     Image.new("L", (48, 48)).save(tmp_path / "gray.png")
@@ -315,32 +315,32 @@ def test_run_records_its_inputs(runs):
     assert inputs == {"seg_ckpt": os.path.join(full, "segmentation"),
                       "enc_ckpt": os.path.join(full, "encoders"), "seed": 0}
     with pytest.raises(FileNotFoundError, match="enc_ckpt"):
-        train.setup(_cfg, None, jax.random.PRNGKey(0), part, enc_ckpt=os.path.join(part, "nope"))
+        driver.setup(_cfg, None, jax.random.PRNGKey(0), part, enc_ckpt=os.path.join(part, "nope"))
     with pytest.raises(FileNotFoundError, match="seg_ckpt"):
-        train.check_given(seg_ckpt=os.path.join(part, "nope"))
+        driver.check_given(seg_ckpt=os.path.join(part, "nope"))
 
 
 def test_reward_encoder_correlations_rank_what_the_encoder_sees():
-    from roll_jax import reward_encoders
+    from roll_jax.analysis import reward_probe
 
     rng = np.random.default_rng(0)
     d_obj, d_hand = rng.uniform(0, 0.2, 64), rng.uniform(0, 0.2, 64)
     a = np.zeros((64, 48, 48, 3), np.uint8)
     b = np.broadcast_to((d_obj * 1000).astype(np.uint8)[:, None, None, None], a.shape).copy()
-    r = reward_encoders.correlations(lambda x: x.reshape(x.shape[0], -1)[:, :1].astype(
+    r = reward_probe.correlations(lambda x: x.reshape(x.shape[0], -1)[:, :1].astype(
         np.float32), (a, b, d_obj, d_hand))
     assert r["spearman_object"] > 0.99 and abs(r["spearman_hand"]) < 0.3
 
 
-def test_reward_encoders_command(runs, tmp_path):
-    from roll_jax import reward_encoders
+def test_reward_probe_command(runs, tmp_path):
+    from roll_jax.analysis import reward_probe
 
     _cfg, full, *_ = runs
-    summary = reward_encoders.main(["--run", full, "--n", "16", "--out", str(tmp_path)])
+    summary = reward_probe.main(["--run", full, "--n", "16", "--out", str(tmp_path)])
     (row,) = summary["runs"]
     assert row["label"] == "roll" and -1 <= row["spearman_object"] <= 1
     assert np.isfinite(row["spearman_hand"])
-    assert os.path.exists(tmp_path / "reward_encoders.png")
+    assert os.path.exists(tmp_path / "reward_probe.png")
 
 
 def test_config_json_round_trip():

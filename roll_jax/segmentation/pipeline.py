@@ -27,7 +27,7 @@ import numpy as np
 from flax import struct
 
 from configs.segmentation import SegmentationConfig
-from roll_jax.checkpoint import read_meta, write_meta
+from roll_jax.common.checkpoint import read_meta, write_meta
 from roll_jax.segmentation import mog2, unet
 
 CHECKPOINT_VERSION = 1

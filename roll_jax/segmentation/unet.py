@@ -26,7 +26,7 @@ import optax
 from jax import lax
 
 from configs.segmentation import SegmentationConfig
-from roll_jax import conv
+from roll_jax.common import conv
 
 # Python-side trace counters: a traced body increments its entry once per compilation.
 TRACE_COUNTS: collections.Counter = collections.Counter()

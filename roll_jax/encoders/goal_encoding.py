@@ -22,8 +22,8 @@ import jax.numpy as jnp
 from flax import struct
 
 from configs.encoders import VAEConfig
-from roll_jax import encoders
-from roll_jax.models import lstm_encode
+from roll_jax.encoders import models
+from roll_jax.encoders.models import lstm_encode
 from roll_jax.segmentation import pipeline
 
 
@@ -70,8 +70,8 @@ class GoalEncoder:
     def frame_latents(self, frozen: Frozen, scene_params, goal_images):
         """Per-frame latent means [..., frame_dim] of goal images (output of goal_images)."""
         if self.object_cfg is None:
-            return encoders.encode_mean(scene_params, self.scene_cfg, goal_images)
-        return encoders.encode_mean(frozen.object_vae, self.object_cfg, goal_images)
+            return models.encode_mean(scene_params, self.scene_cfg, goal_images)
+        return models.encode_mean(frozen.object_vae, self.object_cfg, goal_images)
 
     def sequence(self, lstm_params, frame_latents):
         """Latents [T, d] of one episode -> achieved goals [T, goal_dim] (LSTM from a zero state)."""

@@ -17,7 +17,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from roll_jax.sac import Transition
+from roll_jax.agents.sac import Transition
 
 
 @struct.dataclass

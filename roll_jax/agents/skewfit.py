@@ -11,8 +11,9 @@ import jax
 import jax.numpy as jnp
 
 from configs.train import TrainConfig
-from roll_jax import encoders, replay
-from roll_jax.models import ConvVAE, to_float
+from roll_jax.agents import replay
+from roll_jax.encoders import models
+from roll_jax.encoders.models import ConvVAE, to_float
 
 
 # The per-pixel variance of rlkit's "gaussian_identity_variance" decoder as its estimator uses
@@ -29,7 +30,7 @@ def log_likelihood(cfg: TrainConfig, params, images, key):
     (`REFERENCE_DECODER_VARIANCE`). Terms equal for every image are dropped (the skew weights
     are normalised). The variance sets how sharply p(x)^alpha skews: with variance 1 the
     weights are e times sharper in log space."""
-    model = encoders.vae_model(cfg.scene)
+    model = models.vae_model(cfg.scene)
     mean, logvar = model.apply(params, images, method=ConvVAE.encode)
     eps = jax.random.normal(key, (cfg.skew_num_latents,) + mean.shape)
     z = mean + jnp.exp(0.5 * logvar) * eps  # [K, B, d]

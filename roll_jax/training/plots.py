@@ -56,7 +56,7 @@ def policy_panel(evaluations: list[dict], labels: list[str], goals: list[int], p
     """The paper's policy visualisation: per goal (a row), the goal image, then each
     evaluation's final frame (seed 0) with its final distance. `evaluations`: dicts with
     "goal_images" [G, H, W, 3], "final_frames" [G, H, W, 3], "final_distance" [G] (or None);
-    all evaluated on the same goal images (`roll_jax.evaluate` with the same --seed)."""
+    all evaluated on the same goal images (`roll_jax.analysis.evaluate` with the same --seed)."""
     plt = pyplot()
     cols = 1 + len(evaluations)
     fig, axes = plt.subplots(len(goals), cols, figsize=(1.6 * cols, 1.6 * len(goals)),

@@ -1,6 +1,6 @@
 """What each method's reward encoder measures: object distance or hand distance.
 
-    python -m roll_jax.reward_encoders --run DIR [DIR ...] [--n 500] [--seed S] --out OUT
+    roll-analysis reward-probe --run DIR [DIR ...] [--n 500] [--seed S] --out OUT
 
 For each training run (its latest checkpoint, seed 0's encoders: the scene-VAE as online
 training left it), `n` pairs of random placements (hand uniform in its box, object uniform in
@@ -9,8 +9,8 @@ encoder (the GoalEncoder of the run's config: segment -> object-VAE -> one LSTM 
 ROLL, the scene-VAE of the whole image for Skew-Fit) encodes both, and the latent distance
 is ranked against the object distance (`env.goal_distance`) and the hand distance of the
 pair. ROLL's reward should follow the object and ignore the hand; Skew-Fit's follows both
-(why its policy aligns the arm: paper Fig. 6). Writes OUT/reward_encoders.json and
-OUT/reward_encoders.png (latent vs object distance and vs hand distance, per run).
+(why its policy aligns the arm: paper Fig. 6). Writes OUT/reward_probe.json and
+OUT/reward_probe.png (latent vs object distance and vs hand distance, per run).
 """
 
 from __future__ import annotations
@@ -24,8 +24,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from roll_jax.analysis import batched, spearman
-from roll_jax.goal_encoding import goal_encoder
+from roll_jax.analysis import evaluation
+from roll_jax.analysis.checkpoints import batched
+from roll_jax.analysis.stats import spearman
+from roll_jax.encoders.goal_encoding import goal_encoder
+from roll_jax.training.plots import pyplot
 
 
 def placement_pairs(env, key, n: int):
@@ -69,8 +72,6 @@ def correlations(encode, pairs) -> dict:
 
 
 def plot(results: list[dict], pairs, path: str, x_scale: float, x_unit: str) -> None:
-    from roll_jax.plots import pyplot
-
     plt = pyplot()
     _, _, d_obj, d_hand = pairs
     fig, axes = plt.subplots(len(results), 2, figsize=(7, 2.8 * len(results)), squeeze=False)
@@ -89,9 +90,7 @@ def plot(results: list[dict], pairs, path: str, x_scale: float, x_unit: str) -> 
 
 
 def main(argv=None) -> dict:
-    from roll_jax import evaluation
-
-    p = argparse.ArgumentParser(prog="python -m roll_jax.reward_encoders", description=__doc__,
+    p = argparse.ArgumentParser(prog="roll-analysis reward-probe", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--run", nargs="+", required=True, help="train.py --out directories")
     p.add_argument("--n", type=int, default=500, help="placement pairs (default 500)")
@@ -123,11 +122,11 @@ def main(argv=None) -> dict:
         p.error(str(e))
     os.makedirs(a.out, exist_ok=True)
     door = task == "door_open"
-    plot(results, pairs, os.path.join(a.out, "reward_encoders.png"), 1.0 if door else 100.0,
+    plot(results, pairs, os.path.join(a.out, "reward_probe.png"), 1.0 if door else 100.0,
          "rad" if door else "cm")
     summary = {"task": task, "n": a.n, "seed": a.seed,
                "runs": [{k: v for k, v in r.items() if k != "latent_distance"} for r in results]}
-    with open(os.path.join(a.out, "reward_encoders.json"), "w") as f:
+    with open(os.path.join(a.out, "reward_probe.json"), "w") as f:
         json.dump({**summary, "object_distance": pairs[2].tolist(),
                    "hand_distance": pairs[3].tolist(),
                    "latent_distance": [r["latent_distance"] for r in results]}, f)

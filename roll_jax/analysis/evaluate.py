@@ -1,7 +1,7 @@
 """Evaluate a training run's policy on goal images, as at the paper's test time.
 
-    python -m roll_jax.evaluate --run DIR [--goal-image PNG ...] [--n-goals N] [--seed S]
-        --out OUT                  (roll-evaluate ... once installed)
+    roll-evaluate --run DIR [--goal-image PNG ...] [--n-goals N] [--seed S]
+        --out OUT            (python -m roll_jax.analysis.evaluate ... without installing)
 
 Loads the run's latest checkpoint (finished or not: DIR/ckpt, read only) with its
 segmentation and encoders, takes the goal images (PNG or any image PIL reads, RGB; resized to
@@ -30,7 +30,7 @@ import sys
 
 
 def make_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m roll_jax.evaluate", description=__doc__,
+    p = argparse.ArgumentParser(prog="roll-evaluate", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--run", required=True, metavar="DIR", help="a train.py --out directory")
     p.add_argument("--goal-image", nargs="*", default=[], metavar="PNG",
@@ -55,7 +55,7 @@ def main(argv=None) -> int:
     run, out = os.path.realpath(a.run), os.path.realpath(a.out)
     if out == run or out.startswith(run + os.sep):
         p.error(f"--out {a.out} is inside the run directory {a.run}: evaluate writes nothing there")
-    from roll_jax import evaluation  # JAX: only once the arguments are known to be good
+    from roll_jax.analysis import evaluation  # JAX: only once the arguments are known to be good
 
     try:
         images = [evaluation.read_goal_image(path) for path in a.goal_image]
@@ -71,19 +71,6 @@ def main(argv=None) -> int:
     summary = evaluation.write_outputs(a.out, loaded, res, sources, notes, a.run, a.seed)
     print(json.dumps({k: v for k, v in summary.items() if k != "goals"}, indent=2))
     return 0
-
-
-def __getattr__(name: str):
-    """The library's names (`load_run`, `evaluate`, ...) through this module too, loaded on
-    first use so that the command's --help does not wait for JAX. (Dunder names are not
-    forwarded: the import system probes e.g. `__path__` on `from roll_jax.evaluate import
-    main`.)"""
-    if not name.startswith("__"):
-        from roll_jax import evaluation
-
-        if hasattr(evaluation, name):
-            return getattr(evaluation, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 if __name__ == "__main__":

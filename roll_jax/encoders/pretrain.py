@@ -1,7 +1,7 @@
 """Pre-training of the scene-VAE, the object-VAE and the LSTM (Algorithm 1, first lines;
 appendix "Training schedules").
 
-    python -m roll_jax.pretrain --task TASK [--preset smoke|cpu|paper] --out DIR [--seg DIR]
+    python -m roll_jax.encoders.pretrain --task TASK [--preset smoke|cpu|paper] --out DIR [--seg DIR]
         [--set object_vae.occlusion_shape=edge ...]
 
 - scene data: `n_pretrain_images` frames of a random policy (whole episodes from resets), or
@@ -32,9 +32,9 @@ import numpy as np
 from flax import struct
 
 from configs.train import TrainConfig
-from roll_jax import encoders
-from roll_jax.goal_encoding import goal_encoder
-from roll_jax.checkpoint import read_meta, write_meta
+from roll_jax.common.checkpoint import read_meta, write_meta
+from roll_jax.encoders import models, steps
+from roll_jax.encoders.goal_encoding import goal_encoder
 from roll_jax.segmentation import pipeline
 
 # 3: the push tasks' hand boxes, resets and pretraining placements are the reference code's
@@ -45,9 +45,9 @@ CHECKPOINT_VERSION = 3
 
 @struct.dataclass
 class Pretrained:
-    scene_vae: encoders.ModelState
-    object_vae: encoders.ModelState | None
-    lstm: encoders.ModelState | None
+    scene_vae: steps.ModelState
+    object_vae: steps.ModelState | None
+    lstm: steps.ModelState | None
 
 
 def scene_dataset(env, key, n_images: int, source: str = "random_policy") -> jax.Array:
@@ -144,8 +144,8 @@ def occlude_share(key, images, masks, fraction: float, drop: float):
 def _fit_vae(key, cfg, data, masks, desc, progress: bool, partners=None):
     from tqdm import tqdm
 
-    state = encoders.init_vae(key, cfg)
-    epoch = jax.jit(encoders.vae_fit_epoch, static_argnames="cfg")
+    state = steps.init_vae(key, cfg)
+    epoch = jax.jit(steps.vae_fit_epoch, static_argnames="cfg")
     losses = []
     bar = tqdm(range(cfg.epochs), desc=desc, unit="epoch", disable=not progress)
     for e in bar:
@@ -160,8 +160,8 @@ def _fit_vae(key, cfg, data, masks, desc, progress: bool, partners=None):
 def _fit_lstm(key, cfg, in_dim, latents, horizon, desc, progress: bool):
     from tqdm import tqdm
 
-    state = encoders.init_lstm(key, cfg, in_dim)
-    epoch = jax.jit(encoders.lstm_fit_epoch, static_argnames=("cfg", "batches"))
+    state = steps.init_lstm(key, cfg, in_dim)
+    epoch = jax.jit(steps.lstm_fit_epoch, static_argnames=("cfg", "batches"))
     n = latents.shape[0]
     losses = []
     bar = tqdm(range(cfg.epochs), desc=desc, unit="epoch", disable=not progress)
@@ -243,7 +243,7 @@ def pretrain(cfg: TrainConfig, env, seg_params, key, progress: bool = True,
     scene, info["scene_loss"] = _cached(
         cache, "scene_vae", scene_spec,
         lambda: _fit_vae(k_s, cfg.scene, scene_data(), None, "scene-VAE", progress),
-        lambda: jax.eval_shape(lambda: encoders.init_vae(k_s, cfg.scene)))
+        lambda: jax.eval_shape(lambda: steps.init_vae(k_s, cfg.scene)))
     obj_state = lstm_state = None
     frame_params, frame_cfg, frame_spec, frame_data = scene.params, cfg.scene, scene_spec, scene_data
     if enc.object_cfg is not None:
@@ -286,14 +286,14 @@ def pretrain(cfg: TrainConfig, env, seg_params, key, progress: bool = True,
             cache, "object_vae", obj_spec,
             lambda: _fit_vae(k_o, ocfg, object_data(), data["masks"], "object-VAE", progress,
                              data["partners"]),
-            lambda: jax.eval_shape(lambda: encoders.init_vae(k_o, ocfg)))
+            lambda: jax.eval_shape(lambda: steps.init_vae(k_o, ocfg)))
         frame_params, frame_cfg, frame_spec, frame_data = (obj_state.params, ocfg, obj_spec,
                                                            object_data)
     if enc.lstm:
         lcfg = cfg.lstm
 
         def fit_lstm():
-            lat = jax.jit(encoders.encode_mean, static_argnames="cfg")(frame_params, frame_cfg,
+            lat = jax.jit(models.encode_mean, static_argnames="cfg")(frame_params, frame_cfg,
                                                                         frame_data())
             return _fit_lstm(k_l, lcfg, enc.frame_dim, lat, cfg.horizon, "LSTM", progress)
 
@@ -301,7 +301,7 @@ def pretrain(cfg: TrainConfig, env, seg_params, key, progress: bool = True,
             cache, "lstm", {"frames": frame_spec, "cfg": dataclasses.asdict(lcfg),
                             "in_dim": enc.frame_dim, "horizon": cfg.horizon, "key": _key(k_l)},
             fit_lstm,
-            lambda: jax.eval_shape(lambda: encoders.init_lstm(k_l, lcfg, enc.frame_dim)))
+            lambda: jax.eval_shape(lambda: steps.init_lstm(k_l, lcfg, enc.frame_dim)))
     return Pretrained(scene_vae=scene, object_vae=obj_state, lstm=lstm_state), info
 
 
@@ -312,8 +312,8 @@ def recon_grid(params, cfg, images, path: str, n: int = 8) -> None:
     import cv2
 
     x = images[:n]
-    mean = encoders.encode_mean(params, cfg, x)
-    rec = (np.asarray(encoders.decode(params, cfg, mean)) * 255).round().astype(np.uint8)
+    mean = models.encode_mean(params, cfg, x)
+    rec = (np.asarray(models.decode(params, cfg, mean)) * 255).round().astype(np.uint8)
     grid = np.concatenate([np.concatenate(list(np.asarray(x)), 1), np.concatenate(list(rec), 1)], 0)
     grid = cv2.resize(grid, (grid.shape[1] * 4, grid.shape[0] * 4), interpolation=cv2.INTER_NEAREST)
     cv2.imwrite(path, grid[..., ::-1])
@@ -346,9 +346,9 @@ def initial(cfg: TrainConfig, key) -> Pretrained:
     enc = goal_encoder(cfg)
     k_s, k_o, k_l = jax.random.split(key, 3)
     return Pretrained(
-        scene_vae=encoders.init_vae(k_s, cfg.scene),
-        object_vae=None if enc.object_cfg is None else encoders.init_vae(k_o, enc.object_cfg),
-        lstm=encoders.init_lstm(k_l, cfg.lstm, enc.frame_dim) if enc.lstm else None)
+        scene_vae=steps.init_vae(k_s, cfg.scene),
+        object_vae=None if enc.object_cfg is None else steps.init_vae(k_o, enc.object_cfg),
+        lstm=steps.init_lstm(k_l, cfg.lstm, enc.frame_dim) if enc.lstm else None)
 
 
 def _abstract(cfg: TrainConfig) -> Pretrained:
@@ -393,10 +393,9 @@ def load(path: str, cfg: TrainConfig) -> Pretrained:
 
 
 def main(argv=None):
-    from configs.train import PRESETS, TASKS
-    from roll_jax.train import build_config
+    from configs.train import PRESETS, TASKS, build_config
 
-    p = argparse.ArgumentParser(prog="python -m roll_jax.pretrain", description=__doc__,
+    p = argparse.ArgumentParser(prog="roll-pretrain", description=__doc__,
                                 formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--task", required=True)
     p.add_argument("--preset", default="paper",

@@ -144,21 +144,21 @@ def resolve(a, p):
 def check_run(a, p, cfg, out) -> None:
     """What the run needs beyond its config: the devices, the given checkpoints, and for
     --resume the run it continues (imports JAX for the devices)."""
-    from roll_jax import sharding
+    from roll_jax.training import sharding
 
     try:
         devs = sharding.resolve(a.devices, cfg.seeds)
         sharding.resolve_seed_batch(a.seed_batch, cfg.seeds, len(devs))
     except ValueError as e:
         p.error(str(e))
-    from roll_jax.train import check_given
+    from roll_jax.training.driver import check_given
 
     try:
         check_given(seg_ckpt=a.seg_ckpt, enc_ckpt=a.enc_ckpt)
     except FileNotFoundError as e:
         p.error(str(e))
     if a.resume:
-        from roll_jax.run_dir import check_resume
+        from roll_jax.training.run_dir import check_resume
 
         try:
             check_resume(out, cfg, a.seed)
@@ -251,12 +251,12 @@ def main(argv=None) -> int:
             json.dump(dataclasses.asdict(cfg), f, indent=2)
         print(json.dumps(run_random(cfg), indent=2))
         return 0
-    from roll_jax import compile_cache, train
+    from roll_jax.training import compiler, driver
 
     if a.compile_cache != "off":
-        compile_cache.use(a.compile_cache or compile_cache.default_dir())
+        compiler.use(a.compile_cache or compiler.default_dir())
     t0 = time.time()
-    rows = train.run(cfg, out, resume=a.resume, seg_ckpt=a.seg_ckpt, enc_ckpt=a.enc_ckpt,
+    rows = driver.run(cfg, out, resume=a.resume, seg_ckpt=a.seg_ckpt, enc_ckpt=a.enc_ckpt,
                      seed=a.seed, devices=a.devices, seed_batch=a.seed_batch)
     last = [r for r in rows if r["env_steps"] == rows[-1]["env_steps"]]
     print(json.dumps({"out": out, "env_steps": rows[-1]["env_steps"], "seeds": cfg.seeds,

@@ -11,7 +11,7 @@ log-likelihood is the squared error (losses.py). It is linear, like the referenc
 (which clamps to [0, 1]): a sigmoid output was tried and gets stuck on segmented images -- it
 first learns the black background, saturates, and the vanishing sigmoid gradient never lets
 it learn the object (moving-disc test: stuck at the all-black MSE 0.0114; linear reaches 0.001
-in 250 steps at beta=1). `encoders.decode` clips to [0, 1] for display. The log-variance has
+in 250 steps at beta=1). `decode` clips to [0, 1] for display. The log-variance has
 a floor, log(min_variance) + |dense| (reference code; keeps the posterior variance > 0).
 `decoder="broadcast"` (not in the paper) replaces the decoder's dense layer and first two
 transposed convs with a spatial broadcast decoder (`broadcast_grid`, then two 3x3 convs) before
@@ -25,6 +25,9 @@ L^ae = ||z_t^s - z^hat_t^s||^2 makes the LSTM output reconstruct its *input late
 one step, `(carry, x) -> (carry, z)`; `lstm_encode` scans it over a sequence, zeroing the
 carry where `resets` is set (episode starts), so one call can span several episodes.
 Weights use torch.nn.LSTM's U(-1/sqrt(hidden), 1/sqrt(hidden)) init (reference code).
+
+`vae_model` / `lstm_model` build the module of a config; `encode_mean` and `decode` apply a
+VAE's parameters (the latents of rewards, goals and the LSTM's input; images for display).
 """
 
 from __future__ import annotations
@@ -36,7 +39,8 @@ import flax.linen as nn
 import jax
 import jax.numpy as jnp
 
-from roll_jax import conv
+from configs.encoders import LSTMConfig, VAEConfig
+from roll_jax.common import conv
 
 IMAGE_SHAPE = (48, 48, 3)
 _CONV = ((16, 5, 3), (32, 3, 2), (64, 3, 2))  # (filters, kernel, stride), "Network Architectures"
@@ -77,7 +81,7 @@ def check_images(images, name: str = "images") -> None:
 
 
 class ConvVAE(nn.Module):
-    """``conv_impl``: "matmul" (roll_jax/conv.py, one matmul per layer, the fast path on
+    """``conv_impl``: "matmul" (roll_jax/common/conv.py, one matmul per layer, the fast path on
     XLA:CPU), "matmul_patches" (the same with every transposed conv in the patch form) or
     "lax" (flax's nn.Conv / nn.ConvTranspose, XLA's convolutions); the parameters and values
     are the same either way."""
@@ -260,3 +264,28 @@ def lstm_encode(params: Any, seq: jax.Array, resets: jax.Array | None = None,
 
     _, zs = jax.lax.scan(body, carry, (seq.astype(jnp.float32), resets))
     return zs
+
+
+# --- the models of a config ---------------------------------------------------------------
+
+def vae_model(cfg: VAEConfig) -> ConvVAE:
+    return ConvVAE(latent_dim=cfg.latent_dim, feature_dim=cfg.feature_dim,
+                   min_variance=cfg.min_variance, conv_impl=cfg.conv_impl,
+                   decoder=cfg.decoder)
+
+
+def lstm_model(cfg: LSTMConfig) -> LSTMEncoder:
+    return LSTMEncoder(hidden=cfg.hidden, layers=cfg.layers, out_dim=cfg.out_dim)
+
+
+def encode_mean(params: Any, cfg: VAEConfig, images: jax.Array) -> jax.Array:
+    """Encoder means of images [..., 48, 48, 3] -> [..., latent_dim] (the latents used for
+    rewards, goals and the LSTM input)."""
+    check_images(images)
+    mean, _ = vae_model(cfg).apply(params, images, method=ConvVAE.encode)
+    return mean
+
+
+def decode(params: Any, cfg: VAEConfig, z: jax.Array) -> jax.Array:
+    """Latents [..., latent_dim] -> decoded images [..., 48, 48, 3] float, clipped to [0, 1]."""
+    return jnp.clip(vae_model(cfg).apply(params, z, method=ConvVAE.decode), 0.0, 1.0)

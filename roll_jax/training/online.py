@@ -9,8 +9,9 @@ import jax
 import jax.numpy as jnp
 
 from configs.train import TrainConfig
-from roll_jax import encoders, replay, skewfit
-from roll_jax.goal_encoding import Frozen, GoalEncoder
+from roll_jax.agents import replay, skewfit
+from roll_jax.encoders import models, steps
+from roll_jax.encoders.goal_encoding import Frozen, GoalEncoder
 
 
 def train_scene_vae(cfg: TrainConfig, state, key, n_batches):
@@ -26,7 +27,7 @@ def train_scene_vae(cfg: TrainConfig, state, key, n_batches):
         vs, loss = carry
         k_s, k_step = jax.random.split(jax.random.fold_in(k_train, i))
         imgs = skewfit.sample_images(buf, k_s, cfg.vae_online_batch, cdf)
-        vs, m = encoders.vae_train_step(vs, k_step, imgs, cfg.scene)
+        vs, m = steps.vae_train_step(vs, k_step, imgs, cfg.scene)
         return vs, loss + m["loss"]
 
     vs, loss_sum = jax.lax.fori_loop(0, n_batches, body, (state.scene_vae, jnp.float32(0)))
@@ -40,7 +41,7 @@ def train_scene_vae(cfg: TrainConfig, state, key, n_batches):
 def online_occlusion(cfg: TrainConfig, enc: GoalEncoder, frozen: Frozen, scene_params, key,
                      goal_images):
     """The occluded frame per trajectory of goal images [B, T, H, W, 3] that an online LSTM
-    step's matching loss compares (encoders.Occlusion, encoded now by the frame encoder);
+    step's matching loss compares (steps.Occlusion, encoded now by the frame encoder);
     None when the matching loss is ablated. The clean frames' latents come from the buffer's
     cache (`frame_latents`)."""
     if not cfg.matching_loss:
@@ -49,7 +50,7 @@ def online_occlusion(cfg: TrainConfig, enc: GoalEncoder, frozen: Frozen, scene_p
         params, frame_cfg = frozen.object_vae, enc.object_cfg
     else:
         params, frame_cfg = scene_params, enc.scene_cfg
-    return encoders.make_occlusion(key, params, frame_cfg, goal_images, cfg.lstm)
+    return steps.make_occlusion(key, params, frame_cfg, goal_images, cfg.lstm)
 
 
 def train_lstm(cfg: TrainConfig, enc: GoalEncoder, frozen: Frozen, state, key,
@@ -62,7 +63,7 @@ def train_lstm(cfg: TrainConfig, enc: GoalEncoder, frozen: Frozen, state, key,
         k_s, k_occ, k_step = jax.random.split(jax.random.fold_in(key, i), 3)
         tr = replay.sample_trajectories(s.buffer, k_s, cfg.lstm.online_batch_size)
         occ = online_occlusion(cfg, enc, frozen, s.scene_vae.params, k_occ, tr.object_images)
-        ls, m = encoders.lstm_train_step(s.lstm, k_step, tr.frame_latents, cfg.lstm, occ)
+        ls, m = steps.lstm_train_step(s.lstm, k_step, tr.frame_latents, cfg.lstm, occ)
         return s.replace(lstm=ls), loss + m["loss"]
 
     state, loss_sum = jax.lax.fori_loop(0, n_batches, body, (state, jnp.float32(0)))
@@ -83,7 +84,7 @@ def refresh_scene(cfg: TrainConfig, enc: GoalEncoder, state):
     """After scene-VAE training: the buffer's scene latents, and its frame latents where the
     scene-VAE encodes the goal frames (the same images: no-object-VAE, Skew-Fit)."""
     params = state.scene_vae.params
-    buf = replay.recompute(state.buffer, "obs_latents", lambda x: encoders.encode_mean(params, cfg.scene, x),
+    buf = replay.recompute(state.buffer, "obs_latents", lambda x: models.encode_mean(params, cfg.scene, x),
                            state.buffer.images, REFRESH_CHUNK)
     if enc.object_cfg is None:
         buf = buf.replace(frame_latents=buf.obs_latents)

@@ -24,12 +24,15 @@ import jax.numpy as jnp
 import optax
 
 from configs.encoders import LSTMConfig, VAEConfig
-from roll_jax import losses
-from roll_jax.models import (
+from roll_jax.encoders import losses
+from roll_jax.encoders.models import (
     ConvVAE,
     LSTMEncoder,
     check_images,
+    encode_mean,
     init_lstm_params,
+    lstm_model,
+    vae_model,
 )
 
 
@@ -48,16 +51,6 @@ class Occlusion:
 
     t: jax.Array
     latent: jax.Array
-
-
-def vae_model(cfg: VAEConfig) -> ConvVAE:
-    return ConvVAE(latent_dim=cfg.latent_dim, feature_dim=cfg.feature_dim,
-                   min_variance=cfg.min_variance, conv_impl=cfg.conv_impl,
-                   decoder=cfg.decoder)
-
-
-def lstm_model(cfg: LSTMConfig) -> LSTMEncoder:
-    return LSTMEncoder(hidden=cfg.hidden, layers=cfg.layers, out_dim=cfg.out_dim)
 
 
 def vae_optimizer(cfg: VAEConfig) -> optax.GradientTransformation:
@@ -178,19 +171,6 @@ def vae_fit_epoch(state: ModelState, key: jax.Array, dataset: jax.Array, cfg: VA
     return jax.lax.scan(body, state, jax.random.split(key, cfg.batches_per_epoch))
 
 
-def encode_mean(params: Any, cfg: VAEConfig, images: jax.Array) -> jax.Array:
-    """Encoder means of images [..., 48, 48, 3] -> [..., latent_dim] (the latents used for
-    rewards, goals and the LSTM input)."""
-    check_images(images)
-    mean, _ = vae_model(cfg).apply(params, images, method=ConvVAE.encode)
-    return mean
-
-
-def decode(params: Any, cfg: VAEConfig, z: jax.Array) -> jax.Array:
-    """Latents [..., latent_dim] -> decoded images [..., 48, 48, 3] float, clipped to [0, 1]."""
-    return jnp.clip(vae_model(cfg).apply(params, z, method=ConvVAE.decode), 0.0, 1.0)
-
-
 # --- LSTM -------------------------------------------------------------------------------------
 
 @functools.partial(jax.jit, static_argnums=(1, 2, 3))
@@ -255,15 +235,41 @@ def lstm_train_step(state: ModelState, key: jax.Array, seq_latents: jax.Array, c
     return ModelState(params=params, opt_state=opt_state, step=state.step + 1), metrics
 
 
+@flax.struct.dataclass
+class OcclusionSource:
+    """The segmented images behind a dataset of latent sequences, for the matching loss:
+    images [N, T, 48, 48, 3], their object masks [N, T, 48, 48] (or None: the non-zero
+    pixels) and the frozen object-VAE that encodes an occluded frame."""
+
+    images: jax.Array
+    masks: jax.Array | None
+    vae_params: Any
+    vae_cfg: VAEConfig = flax.struct.field(pytree_node=False)
+
+    def occlusion(self, key: jax.Array, idx: jax.Array, cfg: LSTMConfig) -> Occlusion:
+        """`make_occlusion` of the sequences `idx` [B]."""
+        masks = None if self.masks is None else self.masks[idx]
+        return make_occlusion(key, self.vae_params, self.vae_cfg, self.images[idx], cfg, masks)
+
+
 def lstm_fit_epoch(state: ModelState, key: jax.Array, seq_dataset: jax.Array, cfg: LSTMConfig,
-                   batches: int | None = None) -> tuple[ModelState, dict]:
-    """Auto-encoder pre-training: `batches` (default cfg.batches_per_epoch) steps on minibatches
-    of cfg.batch_size latent sequences drawn from seq_dataset [N, T, d]; one lax.scan."""
+                   batches: int | None = None, occlusions: OcclusionSource | None = None
+                   ) -> tuple[ModelState, dict]:
+    """`batches` (default cfg.batches_per_epoch) steps on minibatches of cfg.batch_size latent
+    sequences drawn uniformly (with replacement) from seq_dataset [N, T, d]: the auto-encoder
+    loss (pretraining), plus the matching loss on frames hidden by `occlusions` when given
+    (the occlusion analysis). One lax.scan; returns the per-batch metrics stacked.
+
+    Each step's key splits into (batch, occlusion, step); with JAX's default partitionable
+    threefry the first key is the same as a split in two gives, so the batches do not depend
+    on whether the matching loss is on (the occlusion analysis trains an LSTM with and one
+    without it on the same batches)."""
     n = seq_dataset.shape[0]
 
     def body(st, k):
-        k_idx, k_step = jax.random.split(k)
+        k_idx, k_occ, k_step = jax.random.split(k, 3)
         idx = jax.random.randint(k_idx, (cfg.batch_size,), 0, n)
-        return lstm_train_step(st, k_step, seq_dataset[idx], cfg)
+        occ = None if occlusions is None else occlusions.occlusion(k_occ, idx, cfg)
+        return lstm_train_step(st, k_step, seq_dataset[idx], cfg, occ)
 
     return jax.lax.scan(body, state, jax.random.split(key, batches or cfg.batches_per_epoch))

@@ -1,8 +1,8 @@
 """Diagnosis of a push task's pretrained encoders and its reset, before any tuning.
 
-    python -m roll_jax.diagnose --task hurdle_bottom --run DIR [--out FILE.json] [--seed 0]
+    roll-analysis diagnose --task hurdle_bottom --run DIR [--out FILE.json] [--seed 0]
 
-DIR holds segmentation/ and encoders/ (a `roll_jax.pretrain --out` or a `train.py` run
+DIR holds segmentation/ and encoders/ (a `roll_jax.encoders.pretrain --out` or a `train.py` run
 directory). Four measurements, each a question a failed learning run raises:
 
 (a) `path`: does ROLL's reward point the right way along the way the puck must go? Pucks are
@@ -106,7 +106,7 @@ def _goal_hand(env) -> np.ndarray:
 
 def latent_along_path(env, encode_object, step: float = 0.01) -> dict:
     """(a): the object latent distance along the task path against the path distance."""
-    from roll_jax.analysis import spearman
+    from roll_jax.analysis.stats import spearman
 
     path = task_path(env.name)
     goal = np.asarray(GOALS[env.name])
@@ -133,7 +133,7 @@ def scene_r2(env, encode_scene, key, n: int = 1000) -> dict:
     """(b): affine R^2 of hand xy and puck xy from the scene latents (held-out, 5 folds)."""
     import jax
 
-    from roll_jax.analysis import _affine_cv_r2
+    from roll_jax.analysis.stats import affine_cv_r2
 
     @jax.jit
     def draw(keys):
@@ -145,8 +145,8 @@ def scene_r2(env, encode_scene, key, n: int = 1000) -> dict:
 
     rgb, hand, puck = map(np.asarray, draw(jax.random.split(key, n)))
     z = np.asarray(encode_scene(rgb), np.float64)
-    return {"n": n, "hand_r2": _affine_cv_r2(z, hand.astype(np.float64), 5),
-            "puck_r2": _affine_cv_r2(z, puck.astype(np.float64), 5),
+    return {"n": n, "hand_r2": affine_cv_r2(z, hand.astype(np.float64), 5),
+            "puck_r2": affine_cv_r2(z, puck.astype(np.float64), 5),
             "puck_std_cm": np.round(puck.std(0) * 100, 2).tolist()}
 
 
@@ -192,13 +192,13 @@ def prior_goal_positions(env, cfg, pre, seg, key, n: int = 256) -> tuple[dict, n
     """(d): decoded prior goals -> where their pucks lie. Returns (summary, decoded images)."""
     import jax
 
-    from roll_jax import encoders
-    from roll_jax.goal_encoding import Frozen, goal_encoder
+    from roll_jax.encoders import models
+    from roll_jax.encoders.goal_encoding import Frozen, goal_encoder
     from roll_jax.segmentation import pipeline
 
     enc = goal_encoder(cfg)
     goals = enc.prior_goals(key, pre.lstm.params if pre.lstm is not None else None, n)
-    decoded = np.asarray(encoders.decode(pre.object_vae.params, enc.object_cfg, goals))
+    decoded = np.asarray(models.decode(pre.object_vae.params, enc.object_cfg, goals))
     # Reference: pucks on a 1 cm grid over the table, hand out of view, segmented as the
     # object-VAE sees them.
     xs, ys = np.arange(-0.2, 0.2001, 0.01), np.arange(0.45, 0.8001, 0.01)
@@ -248,7 +248,7 @@ def diagnose(task: str, run: str, seed: int = 0, png: str | None = None) -> dict
     import jax
 
     import envs_mjx
-    from roll_jax.analysis import load_checkpoint, model_encoders
+    from roll_jax.analysis.checkpoints import load_checkpoint, model_encoders
 
     if task not in GOALS:
         raise ValueError(f"diagnose covers the push tasks {sorted(GOALS)}, got {task!r}")
@@ -269,7 +269,7 @@ def diagnose(task: str, run: str, seed: int = 0, png: str | None = None) -> dict
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(prog="python -m roll_jax.diagnose", description=__doc__,
+    p = argparse.ArgumentParser(prog="roll-analysis diagnose", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--task", required=True, choices=sorted(GOALS), help="a push task")
     p.add_argument("--run", required=True,

@@ -14,7 +14,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from roll_jax.models import ConvVAE, LSTMEncoder, check_images, lstm_encode, to_float
+from roll_jax.encoders.models import ConvVAE, LSTMEncoder, check_images, lstm_encode, to_float
 
 
 def kl_divergence(mean: jax.Array, logvar: jax.Array) -> jax.Array:

@@ -4,8 +4,8 @@ what is in it and how each file is written and read.
     config.json      the TrainConfig (`dataclasses.asdict`), written at the start
     metrics.csv      one row per seed and evaluation (env_steps, seed, final_distance, ...)
     videos/          eval_STEP.gif: test env 0 (observation beside the goal image)
-    plots/           learning_curve.png (roll_jax/plots.py)
-    ckpt/            orbax checkpoints of the whole train state (roll_jax/checkpoint.py)
+    plots/           learning_curve.png (roll_jax/training/plots.py)
+    ckpt/            orbax checkpoints of the whole train state (roll_jax/common/checkpoint.py)
     segmentation/, encoders/   the fitted segmentation and pre-trained encoders
     inputs.json      where the segmentation and encoders the run used are (its own
                      sub-directories, or the --seg-ckpt / --enc-ckpt it was given) and its

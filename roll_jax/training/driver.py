@@ -6,7 +6,7 @@ evaluates the policy it starts from (test envs in the collection batch,
 metrics.csv, checkpoints (orbax, the whole train state including the replay buffer), plots the
 learning curve and drives the progress bar; at the end it writes timings.json (wall and CPU
 seconds per phase; the first chunk's include its compile). Seeds are the state's leading
-axis, vmapped or mapped (`roll_jax.sharding.over_seeds`); with several devices that axis is
+axis, vmapped or mapped (`roll_jax.training.sharding.over_seeds`); with several devices that axis is
 sharded over them. A finished run gets `COMPLETE_MARKER` (complete.json), written atomically last.
 """
 
@@ -22,13 +22,13 @@ import time
 import jax
 import numpy as np
 
-from configs.train import TrainConfig, build_config  # noqa: F401 (the commands' config)
-from roll_jax import loop, pretrain, plots, run_dir
-from roll_jax import sharding as shd
-from roll_jax.checkpoint import restore_train_state, save_train_state, train_state_manager
-from roll_jax.run_dir import COMPLETE_MARKER, is_complete  # noqa: F401 (the driver's API)
-from roll_jax.run_dir import check_resume
-from roll_jax.goal_encoding import Frozen, goal_encoder
+from configs.train import TrainConfig
+from roll_jax.common.checkpoint import restore_train_state, save_train_state, train_state_manager
+from roll_jax.encoders import pretrain
+from roll_jax.encoders.goal_encoding import Frozen, goal_encoder
+from roll_jax.training import loop, plots, run_dir
+from roll_jax.training import sharding as shd
+from roll_jax.training.run_dir import COMPLETE_MARKER, check_resume
 
 LOSS_KEYS = ("q_loss", "policy_loss", "alpha_loss", "vae_loss", "lstm_loss")
 class TrainingDiverged(RuntimeError):

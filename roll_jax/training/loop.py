@@ -35,8 +35,11 @@ import numpy as np
 from flax import struct
 
 from configs.train import TrainConfig, vae_schedule
-from roll_jax import compile_cache, encoders, online_training, replay, sac, skewfit
-from roll_jax.goal_encoding import Frozen, GoalEncoder, goal_encoder
+from roll_jax.agents import replay, sac, skewfit
+from roll_jax.encoders import models, steps
+from roll_jax.encoders.goal_encoding import Frozen, GoalEncoder, goal_encoder
+from roll_jax.training import compiler, online
+from roll_jax.training.sharding import over_seeds
 
 TRACE_COUNTS: collections.Counter = collections.Counter()
 
@@ -46,8 +49,8 @@ class TrainState:
     """Everything one seed carries from chunk to chunk (checkpointed whole)."""
 
     sac: sac.SACState
-    scene_vae: encoders.ModelState
-    lstm: Any  # encoders.ModelState, or None without LSTM
+    scene_vae: steps.ModelState
+    lstm: Any  # steps.ModelState, or None without LSTM
     buffer: replay.ReplayBuffer
     # float32 [N, T+1]: Skew-Fit's log p(x) of every stored scene image under the current
     # scene-VAE (written with each episode, recomputed after each scene-VAE training), so that
@@ -125,7 +128,7 @@ def plan_chunk(cfg: TrainConfig, epoch: int) -> ChunkPlan:
 
 # ----------------------------------------------------------------------------- init
 
-def init_state(key, cfg: TrainConfig, env, scene_vae: encoders.ModelState, lstm) -> TrainState:
+def init_state(key, cfg: TrainConfig, env, scene_vae: steps.ModelState, lstm) -> TrainState:
     """A fresh seed: new SAC nets, given (pretrained) scene-VAE and LSTM, empty buffer."""
     enc = goal_encoder(cfg)
     k_sac, k_env, k_run, k_eval = jax.random.split(key, 4)
@@ -191,7 +194,7 @@ def latent_dims(enc: GoalEncoder, env) -> tuple[int, int, int]:
 
 
 def scene_latents(cfg: TrainConfig, params, images):
-    return encoders.encode_mean(params, cfg.scene, images)
+    return models.encode_mean(params, cfg.scene, images)
 
 
 def needs_log_p(cfg: TrainConfig, enc: GoalEncoder) -> bool:
@@ -506,8 +509,8 @@ def make_chunk(cfg: TrainConfig, env, evaluate: bool = True):
             metrics["vae_loss"] = jnp.float32(0)
         else:
             def vae_round(s):
-                s, m = online_training.train_scene_vae(cfg, s, k_vae, plan.vae_batches)
-                return online_training.refresh_scene(cfg, enc, s), m
+                s, m = online.train_scene_vae(cfg, s, k_vae, plan.vae_batches)
+                return online.refresh_scene(cfg, enc, s), m
 
             state, vae_m = jax.lax.cond(plan.vae_batches > 0, vae_round,
                                         lambda s: (s, {"vae_loss": jnp.float32(0)}), state)
@@ -515,11 +518,11 @@ def make_chunk(cfg: TrainConfig, env, evaluate: bool = True):
         if enc.lstm:
             state, lstm_m = jax.lax.cond(
                 plan.lstm_batches > 0,
-                lambda s: online_training.train_lstm(cfg, enc, frozen, s, k_lstm, plan.lstm_batches),
+                lambda s: online.train_lstm(cfg, enc, frozen, s, k_lstm, plan.lstm_batches),
                 lambda s: (s, {"lstm_loss": jnp.float32(0)}), state)
             metrics.update(lstm_m)
         if not enc.oracle:
-            state = jax.lax.cond(plan.refresh_goals, lambda s: online_training.refresh_goals(enc, s),
+            state = jax.lax.cond(plan.refresh_goals, lambda s: online.refresh_goals(enc, s),
                                  lambda s: s, state)
         state = state.replace(key=key, epoch=state.epoch + 1, last_train={
             k: metrics[k].astype(jnp.float32) for k in train_metric_keys(cfg)})
@@ -562,13 +565,11 @@ def chunk_compiler_options() -> dict | None:
         return None
     flags = os.environ.get("XLA_FLAGS", "")
     options = tuple((k, v) for k, v in CHUNK_CPU_COMPILER_OPTIONS if f"--{k}" not in flags)
-    return compile_cache.accepted_options(options) if options else None
+    return compiler.accepted_options(options) if options else None
 
 
 @functools.lru_cache(maxsize=4)
 def _compiled_chunk(cfg: TrainConfig, env, n_devices: int, seed_batch: int | None,
                     evaluate: bool):
-    from roll_jax.sharding import over_seeds
-
     chunk = over_seeds(make_chunk(cfg, env, evaluate), cfg.seeds, n_devices, seed_batch)
     return jax.jit(chunk, donate_argnums=0, compiler_options=chunk_compiler_options())

@@ -1,5 +1,5 @@
 """A training run's policy evaluated on goal images, as at the paper's test time: the library
-behind `python -m roll_jax.evaluate` (roll_jax/evaluate.py, whose help describes the outputs).
+behind `roll-evaluate` (roll_jax/analysis/evaluate.py, whose help describes the outputs).
 
 `load_run` loads a run's latest checkpoint with its segmentation and encoders, `evaluate` runs
 the deterministic policy of every seed for one episode per goal (given images, or goals
@@ -19,10 +19,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from configs.train import TrainConfig
-from roll_jax import loop, pretrain, run_dir, sac
-from roll_jax.checkpoint import restore_train_state, train_state_manager
-from roll_jax.goal_encoding import Frozen, GoalEncoder, goal_encoder
+from roll_jax.agents import sac
+from roll_jax.common.checkpoint import restore_train_state, train_state_manager
+from roll_jax.encoders import pretrain
+from roll_jax.encoders.goal_encoding import Frozen, GoalEncoder, goal_encoder
 from roll_jax.segmentation import pipeline
+from roll_jax.training import driver, loop, run_dir
 
 IMAGE_SIZE = 48
 
@@ -67,10 +69,8 @@ def load_run(run: str, seg_ckpt: str | None = None, enc_ckpt: str | None = None)
         pre = pretrain.initial(cfg, jax.random.PRNGKey(0))
     else:
         pre = pretrain.load(enc_ckpt or inputs["enc_ckpt"], cfg)
-    from roll_jax import train
-
     keys = jax.random.split(jax.random.PRNGKey(0), cfg.seeds)
-    abstract = jax.eval_shape(lambda k: train.init_states(cfg, env, k, pre), keys)
+    abstract = jax.eval_shape(lambda k: driver.init_states(cfg, env, k, pre), keys)
     epoch, state = restore_train_state(mgr, abstract)
     mgr.close()
     frozen = Frozen(seg=seg, object_vae=None if pre.object_vae is None else pre.object_vae.params)

@@ -1,14 +1,14 @@
 """The paper's experiment grid: tasks x algorithms (x seeds, in one run each), ablations,
 Figure 4, the ablation figure and a results table.
 
-    python -m roll_jax.reproduce --preset paper --out runs/paper
-    python -m roll_jax.reproduce --preset smoke --out runs/smoke --tasks puck_push --seeds 2
-    python -m roll_jax.reproduce ... --ablations            # + ROLL ablations on hurdle_top
-    python -m roll_jax.reproduce ... --report-only          # redraw from the runs on disk
-    python -m roll_jax.reproduce ... --jobs 2               # 2 cells at once (CPU)
-    python -m roll_jax.reproduce ... --algos roll skewfit oracle   # + the state oracle's cells
+    python -m roll_jax.training.reproduce --preset paper --out runs/paper
+    python -m roll_jax.training.reproduce --preset smoke --out runs/smoke --tasks puck_push --seeds 2
+    python -m roll_jax.training.reproduce ... --ablations            # + ROLL ablations on hurdle_top
+    python -m roll_jax.training.reproduce ... --report-only          # redraw from the runs on disk
+    python -m roll_jax.training.reproduce ... --jobs 2               # 2 cells at once (CPU)
+    python -m roll_jax.training.reproduce ... --algos roll skewfit oracle   # + the state oracle's cells
 
-Each cell is one `roll_jax.train.run` in DIR/runs/TASK__VARIANT (all its seeds in one
+Each cell is one `roll_jax.training.driver.run` in DIR/runs/TASK__VARIANT (all its seeds in one
 program: vmapped on a GPU, one after the other on a CPU, `--seed-batch`; sharded over
 --devices). A run with the completion marker is skipped (never rerun, never overwritten); an
 incomplete one is resumed from its last checkpoint. Every cell's config is
@@ -35,10 +35,10 @@ import numpy as np
 
 from configs.overrides import parse_overrides
 from configs.train import ALGOS, PRESETS, TASKS, build_config
-from roll_jax import plots
-from roll_jax.run_dir import check_resume, is_complete, read_rows
+from roll_jax.training import plots
+from roll_jax.training.run_dir import check_resume, is_complete, read_rows
 
-# (roll_jax.train, and with it JAX, is imported where a cell runs: --help and --dry-run do
+# (roll_jax.training.driver, and with it JAX, is imported where a cell runs: --help and --dry-run do
 # without it.)
 
 ABLATION_TASK = "hurdle_top"
@@ -76,7 +76,7 @@ def run_dir(out: str, task: str, variant: str) -> str:
 
 
 def parse_args(argv=None):
-    p = argparse.ArgumentParser(prog="python -m roll_jax.reproduce", description=__doc__,
+    p = argparse.ArgumentParser(prog="roll-reproduce", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--preset", default=DEFAULT_PRESET, metavar="PRESET",
                    help=f"one of {', '.join(PRESETS)} (configs/presets.py; default "
@@ -184,7 +184,7 @@ def pretrain_dir(run_out: str) -> str:
 
 
 def _uses_segmentation(c: Cell) -> bool:
-    from roll_jax.goal_encoding import goal_encoder
+    from roll_jax.encoders.goal_encoding import goal_encoder
 
     return goal_encoder(c.cfg).segment
 
@@ -204,7 +204,7 @@ def fit_dependencies(cells: list[Cell]) -> dict[str, list[Cell]]:
 
 def _models_pretrained(c: Cell) -> int:
     """How many encoders a cell pre-trains (scene-VAE, object-VAE, LSTM): its size, roughly."""
-    from roll_jax.goal_encoding import goal_encoder
+    from roll_jax.encoders.goal_encoding import goal_encoder
 
     enc = goal_encoder(c.cfg)
     return 1 + (enc.object_cfg is not None) + bool(enc.lstm)
@@ -228,9 +228,9 @@ def _use_cache(path: str) -> None:
     """JAX's persistent compilation cache in DIR/.jax_cache (unless one is configured
     already): cells of one task share their data-collection and pre-training programs, and a
     resumed grid skips its compiles."""
-    from roll_jax import compile_cache
+    from roll_jax.training import compiler
 
-    compile_cache.use(path)
+    compiler.use(path)
 
 
 def _run_cell(cfg, out: str, resume: bool, seg_ckpt: str, seed: int, devices, seed_batch,
@@ -241,9 +241,9 @@ def _run_cell(cfg, out: str, resume: bool, seg_ckpt: str, seed: int, devices, se
     if cache is not None:
         _use_cache(cache)
     if run_fn is None:
-        from roll_jax import train
+        from roll_jax.training import driver
 
-        run_fn = train.run
+        run_fn = driver.run
     t0 = time.time()
     run_fn(cfg, out, resume=resume, seg_ckpt=seg_ckpt, seed=seed, devices=devices,
            seed_batch=seed_batch, pretrain_cache=pretrain_dir(out), progress=progress)
@@ -443,7 +443,7 @@ def main(argv=None, run_fn=None, pool=None) -> int:
         cells = plan(a)
         check_existing(cells, a.seed)
         if not (a.report_only or a.dry_run):
-            from roll_jax import sharding
+            from roll_jax.training import sharding
 
             devs = sharding.resolve(a.devices, a.seeds)
             sharding.resolve_seed_batch(a.seed_batch, a.seeds, len(devs))
