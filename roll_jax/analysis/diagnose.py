@@ -1,6 +1,7 @@
 """Diagnosis of a push task's pretrained encoders and its reset, before any tuning.
 
-    roll-analysis diagnose --task hurdle_bottom --run DIR [--out FILE.json] [--seed 0]
+    roll-analysis diagnose --task hurdle_bottom --run DIR [--out FILE.json] [--png PRIOR.png]
+    roll-analysis diagnose --plot before=A.json after=B.json --png PATHS.png
 
 DIR holds segmentation/ and encoders/ (a `roll_jax.encoders.pretrain --out` or a `train.py` run
 directory). Four measurements, each a question a failed learning run raises:
@@ -268,16 +269,60 @@ def diagnose(task: str, run: str, seed: int = 0, png: str | None = None) -> dict
     return out
 
 
+def plot_paths(results: dict, png: str) -> None:
+    """(a)'s profiles side by side: per task, the latent distance to the goal against the path
+    distance, one line per labelled result (`results`: [(label, `diagnose` output)])."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    tasks = sorted({r["task"] for _, r in results})
+    fig, axes = plt.subplots(1, len(tasks), figsize=(4.5 * len(tasks), 3.4), squeeze=False)
+    for ax, task in zip(axes[0], tasks):
+        for label, r in results:
+            if r["task"] != task:
+                continue
+            prof = r["path"]["profile"]
+            order = np.argsort(prof["path_cm"])
+            ax.plot(np.asarray(prof["path_cm"])[order], np.asarray(prof["latent"])[order],
+                    marker=".", label=f"{label} (Spearman {r['path']['spearman']:.2f})")
+        ax.axvline(NEAR * 100, color="grey", lw=0.5, ls="--")
+        ax.set(title=task, xlabel="path distance to the goal (cm)",
+               ylabel="latent distance to the goal image")
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(prog="roll-analysis diagnose", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--task", required=True, choices=sorted(GOALS), help="a push task")
-    p.add_argument("--run", required=True,
-                   help="directory with segmentation/ and encoders/ (pretrain --out or a run)")
+    p.add_argument("--plot", nargs="+", metavar="LABEL=JSON", default=None,
+                   help="instead of measuring: plot (a)'s profiles of written results into "
+                        "--png, e.g. --plot before=a.json after=b.json")
+    p.add_argument("--task", choices=sorted(GOALS), help="a push task (required to measure)")
+    p.add_argument("--run", help="directory with segmentation/ and encoders/ (pretrain --out "
+                                 "or a run); required to measure")
     p.add_argument("--out", default=None, help="JSON file to write (default: print only)")
     p.add_argument("--png", default=None, help="PNG of 32 decoded prior goals")
     p.add_argument("--seed", type=int, default=0, help="seed of the random draws")
     a = p.parse_args(argv)
+    if a.plot:
+        if not a.png:
+            p.error("--plot needs --png")
+        results = []
+        for item in a.plot:
+            label, sep, path = item.partition("=")
+            if not sep:
+                p.error(f"--plot takes LABEL=JSON, got {item!r}")
+            with open(path) as f:
+                results.append((label, json.load(f)))
+        plot_paths(results, a.png)
+        return
+    if not (a.task and a.run):
+        p.error("--task and --run are required to measure")
     res = diagnose(a.task, a.run, a.seed, a.png)
     brief = {k: ({kk: vv for kk, vv in v.items() if kk not in ("profile", "puck_xy")}
                  if isinstance(v, dict) else v) for k, v in res.items()}
