@@ -2,18 +2,18 @@
 
 - `paper`: nothing overridden; the paper's sizes and schedules (GPU-sized: 300k-400k env
   steps, SAC 400-300 at batch 1024).
-- `cpu`: sized by measurement for a 2-core CPU (docs/training.md, "The cpu preset"): the
-  paper's method, smaller networks, batches and run, shorter pretraining (with a smaller
-  object-VAE KL weight and VAE matching coefficient, a faster U-Net learning rate), a
+- `cpu`: sized by measurement for a 2-core CPU (docs/training.md#presets): the paper's
+  method, smaller networks, batches and run, shorter pretraining (with a smaller object-VAE
+  KL weight and VAE matching coefficient, a faster U-Net learning rate), a
   frozen-after-pretraining scene-VAE for ROLL, cached latents refreshed on a schedule. Each
-  departure says why.
+  departure says why in a line.
 - `smoke`: the whole path end to end in minutes (tests, `reproduce --preset smoke`); far too
   short to learn.
 
 Each preset maps a config group to field overrides: "train" (TrainConfig), "train_roll"
 (TrainConfig, ROLL runs and their ablations only), "sac", "scene_vae",
 "object_vae" (VAEConfig), "lstm", "segmentation", "rollout" (train.py --algo random) and
-"occlusion" (the defaults of `python -m roll_jax.analysis occlusion`).
+"occlusion" (the defaults of `roll-analysis occlusion`).
 The values are plain data; configs/train.py and configs/segmentation.py apply them. A value
 that differs between tasks is a `PerTask`, resolved by `Preset.for_task`.
 """
@@ -73,29 +73,21 @@ PAPER = Preset("paper", "the paper's values (appendix tables); GPU-sized", {
 })
 
 CPU = Preset("cpu", "sized for a 2-core CPU: learns puck pushing within a session", {
+    # Each value's reason in one line; the figures behind it: docs/training.md#presets,
+    # docs/encoders.md#the-cpu-presets-encoder-settings, docs/segmentation.md#the-cpu-preset.
     "train": {
         "total_env_steps": 50_000,  # paper 300k-400k: what fits a session on 2 cores
-        # paper 32 per evaluation; the test envs step beside the 10 training envs in the
-        # chunks that evaluate (1 in 4): 16 halve the variance of 8 for little time
-        "n_eval_goals": 16,
+        "n_eval_goals": 16,  # paper 32: half the variance of 8 for little time
         "eval_every_epochs": 4,  # every 2k env steps: the test envs step in 1 chunk of 4
-        # every 10k env steps (paper: every 10 epochs): each checkpoint writes the 50k-frame
-        # buffer (~0.7 GB per seed), which slows the chunk it overlaps by ~2.5 s here
-        "checkpoint_every_epochs": 20,
-        "skew_num_latents": 4,  # paper 10: Skew-Fit's log p(x) per stored frame, 4 decodes
-        "refresh_every_epochs": 4,  # cached LSTM latents of the buffer recomputed every 2k steps
-        # The reference code's reward (-||z' - z_g||, LSTM_wrapped_env.py); the paper writes
-        # the square. The oracle learns with the norm (docs/training.md).
-        "reward_norm": "l2",
-        # rlkit's order trains after each 500-step epoch; the same updates interleaved with the
-        # steps learn faster: the oracle reaches 3 cm at 13k env steps instead of > 20k.
-        "sac_schedule": "step",
+        "checkpoint_every_epochs": 20,  # each writes the 50k-frame buffer, slowing a chunk
+        "skew_num_latents": 4,  # paper 10: Skew-Fit's log p(x) decodes per stored frame
+        "refresh_every_epochs": 4,  # the buffer's cached LSTM latents every 2k env steps
+        "reward_norm": "l2",  # the reference code's -||z' - z_g|| (paper: its square)
+        "sac_schedule": "step",  # updates between the steps: the oracle learns faster
     },
     "train_roll": {
-        # ROLL's scene-VAE is trained in pretraining only (paper: online on rlkit's schedule):
-        # re-encoding the 50k-frame buffer after each round costs more than the SAC updates,
-        # and ROLL's reward does not use it. Skew-Fit keeps the task's schedule: its online,
-        # skewed scene-VAE training is the method.
+        # ROLL's scene-VAE trains in pretraining only: re-encoding the buffer after each
+        # online round costs more than the SAC updates (Skew-Fit keeps its schedule)
         "vae_schedule": "none",
     },
     "sac": {
@@ -105,49 +97,28 @@ CPU = Preset("cpu", "sized for a 2-core CPU: learns puck pushing within a sessio
         "learning_starts": 2_000,  # paper 10k: 1/25 of the run, as 10k is of 250k
     },
     "scene_vae": {
-        # paper 2000 x 25 batches; 400 x 25 = 10k steps (85 s here): the scene latent, the
-        # policy's only input, locates the puck with R^2 0.74 (0.39 after 1000 steps)
-        "epochs": 400,
+        "epochs": 400,  # paper 2000 x 25 batches: 10k steps locate the puck (R^2 0.74)
         "batch_size": 64,
         "n_pretrain_images": 2000,
     },
     "object_vae": {
-        # paper 2000 x 25 batches: 1000 steps; the push latents locate and rank the object
-        # best after 500-1000 steps and fold slowly after that; pickup's 3000 steps lift its
-        # Fig. 5 object Spearman (mean of 2 pretraining x 3 analysis seeds 0.75 -> 0.81) for
-        # +35 s; on hurdle_top they lower r2 (docs/analysis.md)
+        # paper 2000 x 25 batches: the push latents rank best after 500-1000 steps;
+        # pickup's ranking needs 3000
         "epochs": PerTask({"puck_push": 40, "hurdle_bottom": 40, "hurdle_top": 40,
                            "door_open": 40, "pickup": 120}),
         "batch_size": 64,  # paper 128; the KL keeps beta / 128 (kl_reference_batch)
-        # Table 3's beta 20 (KL weight 20/128 per image) lets the latent line of object
-        # positions fold at this budget (pairwise Spearman 0.72-0.78 over init seeds); 5
-        # (5/128): 0.79-0.82, r2 0.84-0.89
-        "beta": 5.0,
+        "beta": 5.0,  # Table 3's 20 lets the latent line of object positions fold
         "n_pretrain_images": 2000,
-        # 1% of Table 2's VAE matching coefficient (push 4, not 400): in 1000 steps the
-        # paper's 400 shrinks every latent mean to a 0.005 scale, where the N(0, I) prior
-        # goals lie far off the data; 4 keeps unit scale and ranks best (docs/analysis.md).
+        # 1% of Table 2's coefficient: the paper's shrinks the latents far off the prior
         "matching_coef_factor": 0.01,
-        # The reference code occludes 0.3 of the push and hurdle pre-training images. At this
-        # budget, on hurdle_top, 0.3 lifts Fig. 5's object Spearman 0.65-0.69 -> 0.88-0.91 and
-        # ROLL learns 1.1 cm closer (paired over 14 evaluations); on hurdle_bottom it lifts
-        # the pairwise Spearman 0.81-0.86 -> 0.91-0.93; on puck_push it lowers r2 0.86-0.89 ->
-        # 0.79-0.82 (docs/analysis.md).
+        # the reference code's 0.3 straightens the hurdles' codes and blurs puck_push's
         "pretrain_occluded_fraction": PerTask({"puck_push": 0.0, "hurdle_bottom": 0.3,
                                                "hurdle_top": 0.3, "door_open": 0.0,
                                                "pickup": 0.0}),
-        # decoder: Table 3's. The spatial broadcast decoder meets the analysis targets on
-        # puck_push, door_open and pickup (puck_push r2 0.91-0.96, pairwise 0.88-0.95), but on
-        # puck_push its policies end within 3 cm of the goal in 24% of 600 episodes against
-        # 39% (3 base seeds; the mean distance is the same), its latent moving half as far per
-        # cm of puck, and the hurdles rank worse (docs/analysis.md, "A spatial broadcast decoder").
+        # decoder: Table 3's (the broadcast decoder's policies finish less precisely)
     },
     "lstm": {
-        # paper 2000 x 25 batches. 80 x 25 = 2000 steps (~35 s here): a goal image is encoded
-        # by one LSTM step, and after 500 steps that step's error was the size of hurdle_top's
-        # latent spread (Fig. 5 object Spearman 0.59 / 0.54 through the LSTM against 0.68 /
-        # 0.70 on the VAE means; 2000 steps: 0.65 / 0.65; docs/analysis.md)
-        "epochs": 80,
+        "epochs": 80,  # paper 2000 x 25 batches: 2000 steps make one step encode a goal
         "batch_size": 32,  # paper 128
         "online_batch_size": 16,  # paper 25 (the reference code: 16)
         # paper (5k, 500, 80), (50k, 500, 20), then (1000, 20): a quarter of the batches
@@ -155,20 +126,13 @@ CPU = Preset("cpu", "sized for a 2-core CPU: learns puck pushing within a sessio
     },
     "segmentation": {
         "n_frames": 1000,  # paper 2000/4000 MOG2 frames
-        # width 8 (the hurdles' and pickup's paper-preset width); pickup 16: with its near-arm
-        # distractors it masks the cube held in the gripper (its goal images) with IoU 0.82,
-        # against 0.76 at width 8 and 0.69 before both (docs/segmentation.md)
+        # pickup 16: it masks the cube held in the gripper (its goal images)
         "unet_features": PerTask({"puck_push": 8, "hurdle_bottom": 8, "hurdle_top": 8,
                                   "door_open": 8, "pickup": 16}),
-        # paper 30. 24 for the width-8 U-Nets: on puck_push 8 -> 24 epochs took robot
-        # leakage 1.09% -> 0.47%, IoU 0.867 -> 0.897 and the object-VAE's r2 0.81-0.85 ->
-        # 0.84-0.89 for 42 s more; pickup's width 16 costs 2.3x per epoch and segments at IoU
-        # 0.95+ in 8 (docs/segmentation.md)
+        # paper 30: 24 lower the arm's leakage at width 8; pickup's width 16 needs 8
         "unet_epochs": PerTask({"puck_push": 24, "hurdle_bottom": 24, "hurdle_top": 24,
                                 "door_open": 24, "pickup": 8}),
-        # paper SGD lr 1e-3: 8 epochs of it leave the U-Net under-confident (puck_push IoU
-        # 0.63, robot leakage 9.7%); 0.03 reaches IoU 0.87 / 1.3% in the same 8 epochs
-        "unet_lr": 0.03,
+        "unet_lr": 0.03,  # paper SGD 1e-3 leaves the U-Net under-confident in few epochs
         "eval_states": 256,  # paper 500
     },
     "rollout": {"n_envs": 8, "episodes": 2, "video_size": 128},
