@@ -4,6 +4,7 @@ import functools
 
 from envs_mjx.env import Env, EnvState, LABEL_BACKGROUND, LABEL_OBJECT, LABEL_ROBOT
 from envs_mjx.tasks import TASKS
+from envs_mjx import registry
 
 TASK_NAMES = tuple(TASKS)
 
@@ -22,5 +23,9 @@ def _make(name: str) -> Env:
     return Env(TASKS[name])
 
 
+# The Gymnasium ids roll/PuckPush-v0, ... (docs/environments.md): registered here when
+# gymnasium is installed; their entry points are strings, resolved by gymnasium.make.
+registry.register_gymnasium()
+
 __all__ = ["Env", "EnvState", "TASK_NAMES", "TASKS", "make",
-           "LABEL_BACKGROUND", "LABEL_ROBOT", "LABEL_OBJECT"]
+           "LABEL_BACKGROUND", "LABEL_ROBOT", "LABEL_OBJECT", "registry"]
