@@ -107,8 +107,6 @@ def _goal_hand(env) -> np.ndarray:
 
 def latent_along_path(env, encode_object, step: float = 0.01) -> dict:
     """(a): the object latent distance along the task path against the path distance."""
-    from roll_jax.analysis.stats import spearman
-
     path = task_path(env.name)
     goal = np.asarray(GOALS[env.name])
     pts = path_points(path, step)
@@ -120,14 +118,25 @@ def latent_along_path(env, encode_object, step: float = 0.01) -> dict:
     zg = np.asarray(encode_object(goal_rgb))[0]
     lat = np.linalg.norm(z - zg, axis=-1)
     pd = path_distance(path, pts, goal)
-    far, near = pd > NEAR, pd <= NEAR
+    start = (np.asarray(env.spec.object_reset_low) + np.asarray(env.spec.object_reset_high)) / 2
+    profile = {"path_cm": np.round(pd * 100, 2).tolist(), "latent": np.round(lat, 4).tolist(),
+               "puck_xy": np.round(pts, 4).tolist(),
+               "reset_path_cm": round(float(path_distance(path, start, goal)[0] * 100), 2)}
     return {"goal": goal.tolist(), "step": step, "n": int(len(pts)),
-            "spearman": spearman(pd, lat),
-            "spearman_beyond_8cm": spearman(pd[far], lat[far]) if far.sum() > 2 else None,
-            "spearman_within_8cm": spearman(pd[near], lat[near]) if near.sum() > 2 else None,
-            "profile": {"path_cm": np.round(pd * 100, 2).tolist(),
-                        "latent": np.round(lat, 4).tolist(),
-                        "puck_xy": np.round(pts, 4).tolist()}}
+            **profile_spearman(profile), "profile": profile}
+
+
+def profile_spearman(profile: dict) -> dict:
+    """Spearman of latent against path distance over the whole path, beyond and within 8 cm of
+    the goal, and on the way from the puck's reset to the goal (path distance up to the
+    reset's: the part a policy must push it along)."""
+    from roll_jax.analysis.stats import spearman
+
+    pd, lat = np.asarray(profile["path_cm"]) / 100, np.asarray(profile["latent"])
+    parts = {"spearman": np.ones_like(pd, bool), "spearman_beyond_8cm": pd > NEAR,
+             "spearman_within_8cm": pd <= NEAR,
+             "spearman_on_the_way": pd <= profile["reset_path_cm"] / 100 + 1e-9}
+    return {k: spearman(pd[m], lat[m]) if m.sum() > 2 else None for k, m in parts.items()}
 
 
 def scene_r2(env, encode_scene, key, n: int = 1000) -> dict:
