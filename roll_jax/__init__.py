@@ -20,7 +20,8 @@ from roll_jax.common.lazy import lazy_api
 __all__, __getattr__, __dir__ = lazy_api(__name__, {
     "configs.train": ("build_config", "make_config"),
     ".training.driver": ("run",),
-    ".training.loop": ("TrainState", "make_chunk", "compile_chunk"),
+    ".training.loop": ("make_chunk", "compile_chunk"),
+    ".training.state": ("TrainState",),
     ".encoders.goal_encoding": ("goal_encoder",),
     ".encoders.pretrain": ("pretrain",),
     ".analysis.evaluation": ("load_run", "evaluate"),

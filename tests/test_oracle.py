@@ -6,9 +6,10 @@ import pytest
 
 import envs_mjx
 from configs.train import make_config
-from roll_jax.encoders import pretrain
-from roll_jax.training import loop
+from roll_jax.encoders import oracle, pretrain
 from roll_jax.encoders.goal_encoding import Frozen, goal_encoder
+from roll_jax.training import loop
+from roll_jax.training import state as train_state
 
 
 @pytest.fixture(scope="module")
@@ -23,17 +24,18 @@ def chunk_out():
     cfg = dataclasses.replace(base, sac=dataclasses.replace(base.sac, learning_starts=0))
     env = envs_mjx.make("puck_push")
     pre = pretrain.initial(cfg, jax.random.PRNGKey(0))
-    state = jax.jit(lambda k: loop.init_state(k, cfg, env, pre.scene_vae, pre.lstm))(
+    state = jax.jit(lambda k: train_state.init_state(k, cfg, env, pre.scene_vae, pre.lstm))(
         jax.random.PRNGKey(1))
     chunk = jax.jit(loop.make_chunk(cfg, env))
-    new, metrics = chunk(state, Frozen(seg=None, object_vae=None), loop.plan_chunk(cfg, 0))
+    new, metrics = chunk(state, Frozen(seg=None, object_vae=None), train_state.plan_chunk(cfg, 0))
     return cfg, env, new, metrics, state, chunk
 
 
 def test_oracle_stores_true_positions(chunk_out):
     cfg, env, state, *_ = chunk_out
     enc = goal_encoder(cfg)
-    assert enc.oracle and not enc.segment and not enc.lstm
+    assert isinstance(enc, oracle.StateOracle) and not enc.from_pixels
+    assert not enc.segment and not enc.lstm
     buf = state.buffer
     n = cfg.n_envs * cfg.episodes_per_epoch
     assert int(buf.size) == n
@@ -45,9 +47,9 @@ def test_oracle_stores_true_positions(chunk_out):
     np.testing.assert_array_equal(np.asarray(buf.frame_latents[:n]), goal)
     # The last stored frame is the envs' final state, centred, in units of ORACLE_SCALE metres.
     last = state.env_state
-    centre = loop.oracle_centre(env)
-    hand = (np.asarray(jax.vmap(env.hand_pos)(last)) - centre[:3]) / loop.ORACLE_SCALE
-    puck = (np.asarray(jax.vmap(env.object_state)(last)) - centre[3:]) / loop.ORACLE_SCALE
+    centre = oracle.oracle_centre(env)
+    hand = (np.asarray(jax.vmap(env.hand_pos)(last)) - centre[:3]) / oracle.ORACLE_SCALE
+    puck = (np.asarray(jax.vmap(env.object_state)(last)) - centre[3:]) / oracle.ORACLE_SCALE
     np.testing.assert_allclose(obs[-cfg.n_envs:, -1, :3], hand, rtol=1e-5, atol=1e-5)
     np.testing.assert_allclose(goal[-cfg.n_envs:, -1], puck, rtol=1e-5, atol=1e-5)
     # The (untrained, stochastic) policy moves the hand: the episode is not a constant.
@@ -66,9 +68,9 @@ def test_oracle_evaluates_with_a_rendered_video(chunk_out):
 
 def test_oracle_goal_bank_lies_in_the_goal_space():
     env = envs_mjx.make("puck_push")
-    bank = np.asarray(jax.jit(lambda k: loop.goal_bank(env, k, 256))(
-        jax.random.PRNGKey(0)))
-    assert bank.shape == (256, env.object_size)
+    enc = oracle.StateOracle()
+    bank = np.asarray(jax.jit(lambda k: enc.goal_bank(env, k))(jax.random.PRNGKey(0)))
+    assert bank.shape == (oracle.ORACLE_BANK, env.object_size)
     lo, hi = bank.min(0), bank.max(0)
     assert np.all(hi - lo > 0.5)  # spread over the box (> 5 cm per axis)
     assert np.all(np.abs(bank.mean(0)) < 0.2)  # centred: the goal space's middle is 0
@@ -76,8 +78,8 @@ def test_oracle_goal_bank_lies_in_the_goal_space():
     goal_state = jax.jit(env.sample_goal)(jax.random.PRNGKey(7))
     goal = np.asarray(jax.jit(env.object_state)(goal_state))
     np.testing.assert_allclose(
-        jax.jit(lambda s: loop.oracle_goal(env, s))(goal_state),
-        (goal - loop.oracle_centre(env)[3:]) / loop.ORACLE_SCALE, rtol=1e-6)
+        jax.jit(lambda s: enc.goal(env, s))(goal_state),
+        (goal - oracle.oracle_centre(env)[3:]) / oracle.ORACLE_SCALE, rtol=1e-6)
 
 
 def test_step_schedule_learns_during_collection_and_evaluates_the_start_policy(chunk_out):
@@ -89,7 +91,7 @@ def test_step_schedule_learns_during_collection_and_evaluates_the_start_policy(c
     cfg, env, s_state, s_m, start, chunk = chunk_out
     assert cfg.sac_schedule == "step" and cfg.sac.learning_starts == 0
     frozen = Frozen(seg=None, object_vae=None)
-    plan = loop.plan_chunk(cfg, 0)
+    plan = train_state.plan_chunk(cfg, 0)
     assert bool(plan.learn) and not bool(plan.act_random)
     # The same program and start, SAC off: the policy stays the one the chunk started with.
     f_state, f_m = chunk(start, frozen, plan.replace(learn=jax.numpy.bool_(False)))

@@ -45,7 +45,8 @@ SCRIPT = textwrap.dedent("""
     from configs.segmentation import segmentation_config
     from configs.train import make_config
     from roll_jax.encoders import pretrain
-    from roll_jax.training import driver, loop, sharding
+    from roll_jax.training import driver, loop, run_dir, sharding
+    from roll_jax.training.state import init_state
     from roll_jax.segmentation import pipeline
 
     assert jax.device_count() == 2, jax.devices()
@@ -129,8 +130,8 @@ SCRIPT = textwrap.dedent("""
     report["runs"] = out
     import envs_mjx
     pre = pretrain.initial(cfg, jax.random.PRNGKey(2))
-    abstract = jax.eval_shape(lambda k: loop.init_state(k, cfg, envs_mjx.make("puck_push"),
-                                                        pre.scene_vae, pre.lstm),
+    abstract = jax.eval_shape(lambda k: init_state(k, cfg, envs_mjx.make("puck_push"),
+                                                  pre.scene_vae, pre.lstm),
                               jax.random.PRNGKey(0))
     # The checkpoint's keys index all leaves (empty ones are not saved).
     report["leaf_paths"] = [jax.tree_util.keystr(p) for p, _ in

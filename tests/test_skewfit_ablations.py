@@ -14,10 +14,11 @@ from scipy import stats
 
 from configs.encoders import VAEConfig
 from configs.train import make_config
-from roll_jax.agents import replay, skewfit
+from roll_jax.agents import her, replay, skewfit
 from roll_jax.encoders import losses, models, steps
-from roll_jax.training import loop, online
-from roll_jax.encoders.goal_encoding import Frozen, GoalEncoder, goal_encoder
+from roll_jax.encoders.goal_encoding import PRIOR_BANK, Frozen, GoalEncoder, goal_encoder
+from roll_jax.training import online
+from roll_jax.training.state import TrainState, plan_chunk, skew_cdf_of, store_episodes
 from roll_jax.common.checkpoint import write_meta
 
 CAP, T, HW, A, DG = 5, 3, 4, 2, 2
@@ -68,17 +69,17 @@ def test_skewing_starts_after_skew_start_epoch():
     np.testing.assert_allclose(at(jnp.int32(4)), skewfit.skew_cdf(log_p, cfg.skew_alpha, 3),
                                rtol=1e-6)
     assert np.abs(np.asarray(at(jnp.int32(4))) - uniform).max() > 0.1  # the skew is visible
-    state = loop.TrainState(sac=None, scene_vae=None, lstm=None, buffer=_buffer(3),
-                            skew_log_p=log_p, env_state=None, test_start=None, last_train={},
-                            key=None, env_steps=None, epoch=jnp.int32(2), eval_key=None)
-    np.testing.assert_allclose(loop._skew_cdf_of(cfg, SKEWFIT, state), uniform, rtol=1e-6)
+    state = TrainState(sac=None, scene_vae=None, lstm=None, buffer=_buffer(3),
+                       skew_log_p=log_p, env_state=None, test_start=None, last_train={},
+                       key=None, env_steps=None, epoch=jnp.int32(2), eval_key=None)
+    np.testing.assert_allclose(skew_cdf_of(cfg, SKEWFIT, state), uniform, rtol=1e-6)
     with pytest.raises(ValueError, match="skew_start_epoch must be >= 0, got -1"):
         make_config("puck_push", "skewfit", "smoke", skew_start_epoch=-1)
 
 
 @functools.partial(jax.jit, static_argnums=(0, 4))
 def _fresh(enc, buf, cdf, key, n):
-    return loop.fresh_goals(enc, buf, cdf, key, n)
+    return her.fresh_goals(enc, buf, her.FreshGoals(cdf=cdf), key, n)
 
 
 def test_skewed_goal_frequencies_match_weights():
@@ -102,16 +103,16 @@ def test_fresh_goals_fall_back_to_prior_per_seed():
     log_p = jnp.zeros((CAP, T1))
     bufs = jax.tree.map(lambda a, b: jnp.stack([a, b]), _buffer(0), _buffer(2))
     cdfs = jax.vmap(lambda b: skewfit.skew_cdf(log_p, -1.0, b.size))(bufs)
-    goals = np.asarray(jax.vmap(lambda b, c: loop.fresh_goals(SKEWFIT, b, c,
-                                                              jax.random.PRNGKey(3), 4000))(bufs, cdfs))
+    goals = np.asarray(jax.vmap(lambda b, c: her.fresh_goals(SKEWFIT, b, her.FreshGoals(cdf=c),
+                                                             jax.random.PRNGKey(3), 4000))(bufs, cdfs))
     empty, filled = goals
     assert abs(empty.mean()) < 0.05 and abs(empty.std() - 1) < 0.05
     assert set(np.unique(filled[:, 0]).astype(int)) == set(range(2 * T1))  # uniform when log_p equal
     key = jax.random.PRNGKey(4)
-    bank = loop.goal_prior(make_config("puck_push", "roll", "smoke"), PRIOR, None, _buffer(3),
-                           key)
-    np.testing.assert_array_equal(loop.fresh_goals(PRIOR, _buffer(3), None, key, 8, bank),
-                                  loop.fresh_goals(PRIOR, _buffer(0), None, key, 8, bank))
+    bank = her.FreshGoals(bank=her.goal_prior(make_config("puck_push", "roll", "smoke"), PRIOR,
+                                              None, _buffer(3), key))
+    np.testing.assert_array_equal(her.fresh_goals(PRIOR, _buffer(3), bank, key, 8),
+                                  her.fresh_goals(PRIOR, _buffer(0), bank, key, 8))
 
 
 def test_buffer_prior_matches_the_stored_frame_latents():
@@ -122,10 +123,10 @@ def test_buffer_prior_matches_the_stored_frame_latents():
     lat[3:] = 100.0  # unfilled slots: ignored
     buf = replay.init_buffer(CAP, T, (HW, HW, 3), A, DG, DG).replace(
         frame_latents=jnp.asarray(lat), size=jnp.int32(3))
-    mean, std = jax.jit(loop.frame_stats)(buf)
+    mean, std = jax.jit(her.frame_stats)(buf)
     np.testing.assert_allclose(mean, lat[:3].reshape(-1, DG).mean(0), rtol=1e-5)
     np.testing.assert_allclose(std, lat[:3].reshape(-1, DG).std(0), rtol=1e-5)
-    empty = jax.jit(loop.frame_stats)(buf.replace(size=jnp.int32(0)))
+    empty = jax.jit(her.frame_stats)(buf.replace(size=jnp.int32(0)))
     np.testing.assert_array_equal(empty[0], 0.0)
     np.testing.assert_array_equal(empty[1], 1.0)
     goals = np.asarray(PRIOR.prior_goals(jax.random.PRNGKey(0), None, 20000, (mean, std)))
@@ -133,30 +134,31 @@ def test_buffer_prior_matches_the_stored_frame_latents():
     np.testing.assert_allclose(goals.std(0), std, rtol=0.03)
     # The chunk's bank of prior goals (no LSTM here: the goals are the prior samples).
     key = jax.random.PRNGKey(1)
-    bank = np.asarray(loop.goal_prior(make_config("puck_push", "roll", "smoke",
-                                                  prior_goals="buffer"), PRIOR, None, buf, key))
-    assert bank.shape == (loop.PRIOR_BANK, DG)
+    bank = np.asarray(her.goal_prior(make_config("puck_push", "roll", "smoke",
+                                                 prior_goals="buffer"), PRIOR, None, buf, key))
+    assert bank.shape == (PRIOR_BANK, DG)
     np.testing.assert_allclose(bank.mean(0), mean, atol=0.15)
     np.testing.assert_allclose(bank.std(0), std, rtol=0.05)
-    standard = np.asarray(loop.goal_prior(make_config("puck_push", "roll", "smoke"), PRIOR, None,
-                                          buf, key))
+    standard = np.asarray(her.goal_prior(make_config("puck_push", "roll", "smoke"), PRIOR, None,
+                                         buf, key))
     np.testing.assert_allclose(standard.mean(0), 0.0, atol=0.05)
     np.testing.assert_allclose(standard.std(0), 1.0, rtol=0.05)
-    assert loop.goal_prior(make_config("puck_push", "skewfit", "smoke"), SKEWFIT, None, buf,
-                           key) is None
+    assert her.goal_prior(make_config("puck_push", "skewfit", "smoke"), SKEWFIT, None, buf,
+                          key) is None
     # Fresh goals for ROLL are rows of the bank.
-    fresh = np.asarray(loop.fresh_goals(PRIOR, buf, None, key, 64, jnp.asarray(bank)))
+    fresh = np.asarray(her.fresh_goals(PRIOR, buf, her.FreshGoals(bank=jnp.asarray(bank)), key,
+                                       64))
     assert all((bank == row).all(1).any() for row in fresh)
     with pytest.raises(ValueError, match="unknown prior_goals 'data'"):
         make_config("puck_push", "roll", "smoke", prior_goals="data")
 
 
 def test_store_episodes_writes_log_p_to_the_ring_slots():
-    state = loop.TrainState(sac=None, scene_vae=None, lstm=None,
-                            buffer=replay.init_buffer(CAP, T, (HW, HW, 3), A, DG, DG),
-                            skew_log_p=jnp.zeros((CAP, T1)), env_state=None, test_start=None,
-                            last_train={}, key=None, env_steps=None, epoch=None, eval_key=None)
-    store = jax.jit(loop.store_episodes)
+    state = TrainState(sac=None, scene_vae=None, lstm=None,
+                       buffer=replay.init_buffer(CAP, T, (HW, HW, 3), A, DG, DG),
+                       skew_log_p=jnp.zeros((CAP, T1)), env_state=None, test_start=None,
+                       last_train={}, key=None, env_steps=None, epoch=None, eval_key=None)
+    store = jax.jit(store_episodes)
     for first in (0, 2, 4):  # slots 0,1 / 2,3 / 4,0
         ids = jnp.arange(first, first + 2, dtype=jnp.float32)
         traj = replay.Trajectory(
@@ -226,11 +228,11 @@ def test_ablation_changes_exactly_its_part(variant, data):
         assert cfg.object_vae.matching_coef > 0 and enc.object_cfg.matching_coef == want
         assert enc.object_cfg.latent_dim == obj_latent
     if not enc.lstm:
-        assert all(loop.plan_chunk(cfg, e).lstm_batches == 0 for e in range(4))
+        assert all(plan_chunk(cfg, e).lstm_batches == 0 for e in range(4))
         x = jnp.ones((TT, enc.frame_dim))
         assert enc.sequence(None, x) is x and enc.goal_dim == obj_latent
         return
-    assert any(loop.plan_chunk(cfg, e).lstm_batches > 0 for e in range(4))
+    assert any(plan_chunk(cfg, e).lstm_batches > 0 for e in range(4))
     lstm = steps.init_lstm(jax.random.PRNGKey(1), cfg.lstm, enc.frame_dim)
     for gate in ("ii", "if", "ig", "io"):  # input kernels of the first cell: [frame_dim, hidden]
         assert lstm.params["params"]["cells_0"][gate]["kernel"].shape[0] == enc.frame_dim
@@ -280,7 +282,7 @@ def test_skewfit_has_no_lstm_object_vae_or_segmentation():
     enc = goal_encoder(cfg)
     assert enc.skewed_goals and not enc.lstm and not enc.segment and enc.object_cfg is None
     assert enc.goal_dim == cfg.scene.latent_dim == 4  # Table 2: Skew-Fit puck latent size
-    assert all(loop.plan_chunk(cfg, e).lstm_batches == 0 for e in range(4))
+    assert all(plan_chunk(cfg, e).lstm_batches == 0 for e in range(4))
     rgb = jnp.zeros((2, 48, 48, 3), jnp.uint8)
     assert enc.goal_images(Frozen(seg=None, object_vae=None), rgb) is rgb
 
@@ -308,7 +310,7 @@ def test_encoder_checkpoint_of_full_roll_is_refused_by_the_matching_ablation(tmp
 
 def test_encoder_checkpoint_of_another_decoder_is_refused(tmp_path):
     from roll_jax.encoders import pretrain
-    from roll_jax.training.driver import build_config
+    from configs.train import build_config
 
     table3 = build_config("puck_push", "roll", "smoke")
     broadcast = build_config("puck_push", "roll", "smoke",
@@ -372,10 +374,10 @@ def test_online_scene_vae_round_recomputes_log_p_of_the_filled_episodes_only():
     rng = np.random.default_rng(1)
     buf = buf.replace(images=jnp.asarray(rng.integers(0, 256, buf.images.shape), jnp.uint8),
                       size=jnp.int32(3))
-    state = loop.TrainState(sac=None, scene_vae=vae, lstm=None, buffer=buf,
-                            skew_log_p=jnp.full((cap, t + 1), -5.0), env_state=None,
-                            test_start=None, last_train={}, key=None, env_steps=None,
-                            epoch=jnp.int32(1), eval_key=None)
+    state = TrainState(sac=None, scene_vae=vae, lstm=None, buffer=buf,
+                       skew_log_p=jnp.full((cap, t + 1), -5.0), env_state=None,
+                       test_start=None, last_train={}, key=None, env_steps=None,
+                       epoch=jnp.int32(1), eval_key=None)
     key = jax.random.PRNGKey(2)
     new, _ = jax.jit(lambda s: online.train_scene_vae(cfg, s, key, 2))(state)
     keys = jax.random.split(jax.random.split(key)[0], cap)  # train_scene_vae's k_lp

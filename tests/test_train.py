@@ -13,6 +13,7 @@ from configs.sac import SACConfig
 from configs.segmentation import segmentation_config
 from configs.train import make_config
 from roll_jax.training import driver, loop, run_dir, sharding
+from roll_jax.training.state import plan_chunk
 
 
 def tiny(**kw):
@@ -143,7 +144,7 @@ def test_equal_keys_give_equal_seeds(runs):
     # compiled program comes from the persistent cache instead of a second compile.
     state = driver.init_states(cfg, env, jax.numpy.stack([key, key]), pre)
     chunk = loop.compile_chunk(cfg, env, 1, sharding.resolve_seed_batch("auto", cfg.seeds))
-    state, m = chunk(state, frozen, loop.plan_chunk(cfg, 0))
+    state, m = chunk(state, frozen, plan_chunk(cfg, 0))
     for leaf in jax.tree.leaves((state.sac, m)):
         np.testing.assert_array_equal(np.asarray(leaf[0]), np.asarray(leaf[1]))
 

@@ -22,9 +22,10 @@ from configs.train import TrainConfig
 from roll_jax.agents import sac
 from roll_jax.common.checkpoint import restore_train_state, train_state_manager
 from roll_jax.encoders import pretrain
-from roll_jax.encoders.goal_encoding import Frozen, GoalEncoder, goal_encoder
+from roll_jax.encoders.goal_encoding import Frozen, goal_encoder
 from roll_jax.segmentation import pipeline
-from roll_jax.training import driver, loop, run_dir
+from roll_jax.training import driver, run_dir
+from roll_jax.training.state import TrainState, lstm_params_of
 
 IMAGE_SIZE = 48
 
@@ -34,7 +35,7 @@ class LoadedRun:
     cfg: TrainConfig
     env: object
     frozen: Frozen
-    state: loop.TrainState  # [seeds]-batched
+    state: TrainState  # [seeds]-batched
     epoch: int
 
 
@@ -65,7 +66,7 @@ def load_run(run: str, seg_ckpt: str | None = None, enc_ckpt: str | None = None)
     seg = None
     if enc.segment:
         seg, _ = pipeline.load(seg_ckpt or inputs["seg_ckpt"], cfg.task, cfg.scene.image_shape)
-    if enc.oracle:
+    if not enc.from_pixels:  # the oracle
         pre = pretrain.initial(cfg, jax.random.PRNGKey(0))
     else:
         pre = pretrain.load(enc_ckpt or inputs["enc_ckpt"], cfg)
@@ -98,13 +99,6 @@ def read_goal_image(path: str) -> tuple[np.ndarray, str | None]:
     return np.asarray(img, np.uint8), note
 
 
-def _goal_latents(enc: GoalEncoder, env, frozen, state, rgb, goal_states):
-    if enc.oracle:
-        return jax.vmap(lambda st: loop.oracle_goal(env, st))(goal_states)
-    lstm_params = None if state.lstm is None else state.lstm.params
-    return enc.encode_goal_images(frozen, state.scene_vae.params, lstm_params, rgb)
-
-
 @functools.lru_cache(maxsize=4)
 def make_rollout(cfg: TrainConfig):
     """jit(vmap over seeds) of one deterministic episode per goal -> per seed: final env
@@ -118,34 +112,26 @@ def make_rollout(cfg: TrainConfig):
 
     def one_seed(frozen, state, goal_rgb, goal_states, key):
         g = goal_rgb.shape[0]
-        goals = _goal_latents(enc, env, frozen, state, goal_rgb, goal_states)
+        scene, lstm = state.scene_vae.params, lstm_params_of(state)
+        goals = enc.encode_goals(env, frozen, scene, lstm, goal_rgb, goal_states)
         k_start, k_ep = jax.random.split(key)
         starts = jax.vmap(env.reset)(jax.random.split(k_start, g))
         es = jax.vmap(env.reset_episode)(starts, jax.random.split(k_ep, g))
-
-        def observe(es):
-            if enc.oracle:
-                return jax.vmap(lambda st: loop.oracle_obs(env, st))(es), jax.vmap(env.render)(es)
-            rgb = jax.vmap(env.render)(es)
-            return loop.scene_latents(cfg, state.scene_vae.params, rgb), rgb
+        every = slice(None)  # every env's frames (the GIFs)
 
         def step(es, _):
-            z, rgb = observe(es)
+            z, rec, rgb = enc.observe(env, scene, es, every)
             a = sac.select_action(state.sac.policy_params, z, goals, None, deterministic=True,
                                   cfg=cfg.sac)
-            return jax.vmap(env.step)(es, a), rgb
+            return jax.vmap(env.step)(es, a), (rec, rgb)
 
-        es, frames = jax.lax.scan(step, es, None, length=cfg.horizon)
-        _, last = observe(es)
-        frames = jnp.concatenate([frames, last[None]], 0).swapaxes(0, 1)  # [G, T+1, ...]
-        if enc.oracle:
-            achieved = jax.vmap(lambda st: loop.oracle_goal(env, st))(es)
-        else:
-            lstm_params = None if state.lstm is None else state.lstm.params
-            lat = enc.frame_latents(frozen, state.scene_vae.params,
-                                    enc.goal_images(frozen, frames))
-            achieved = jax.vmap(lambda f: enc.achieved(lstm_params, f))(lat)[:, -1]
-        return es, frames, goals, achieved
+        es, (recs, frames) = jax.lax.scan(step, es, None, length=cfg.horizon)
+        _, rec, last = enc.observe(env, scene, es, every)
+        episode_major = lambda xs, x: jnp.concatenate([xs, x[None]], 0).swapaxes(0, 1)  # noqa: E731
+        frames = episode_major(frames, last)  # [G, T+1, ...]
+        records = jax.tree.map(episode_major, recs, rec)
+        achieved = enc.encode_episodes(frozen, scene, lstm, records)[3]
+        return es, frames, goals, achieved[:, -1]
 
     return jax.jit(jax.vmap(one_seed, in_axes=(None, 0, None, None, None)))
 
@@ -178,7 +164,7 @@ def evaluate(loaded: LoadedRun, goal_images: list[np.ndarray] | None, n_goals: i
     cfg, env = loaded.cfg, loaded.env
     k_goal, k_run = jax.random.split(jax.random.PRNGKey(seed))
     if goal_images:
-        if goal_encoder(cfg).oracle:
+        if not goal_encoder(cfg).from_pixels:
             raise ValueError("an oracle run acts on true goal states: goal images cannot be "
                              "evaluated (omit --goal-image to sample goals)")
         rgb = jnp.asarray(np.stack(goal_images), jnp.uint8)

@@ -62,9 +62,9 @@ def puck_paths(key, task: str, n: int, horizon: int, speed=(0.003, 0.008), jitte
     cum = np.r_[0.0, np.cumsum(seg_len)]
     total = cum[-1]
     v = rng.uniform(*speed, size=(n, 1))
-    steps = v * rng.uniform(0.7, 1.3, size=(n, horizon))
+    step_len = v * rng.uniform(0.7, 1.3, size=(n, horizon))
     s0 = rng.uniform(0.0, total - 0.05, size=(n, 1))
-    s = np.clip(s0 + np.cumsum(steps, axis=1) - steps[:, :1], 0.0, total)
+    s = np.clip(s0 + np.cumsum(step_len, axis=1) - step_len[:, :1], 0.0, total)
     i = np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(seg) - 1)
     frac = (s - cum[i]) / seg_len[i]
     offset = rng.uniform(-jitter, jitter, size=(n, 1, 2))
@@ -334,17 +334,17 @@ def write_occlusion_curve(curve: list[dict], out_dir: str, task: str) -> str:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    steps = np.array([c["lstm_steps"] for c in curve], np.float64)
+    lstm_steps = np.array([c["lstm_steps"] for c in curve], np.float64)
     fig, ax = plt.subplots(figsize=(5.2, 3.8))
     styles = {"lstm_matching": ("LSTM + matching loss", "tab:blue"),
               "lstm": ("LSTM", "tab:orange"), "vae": ("object-VAE", "tab:green")}
     for name, (label, color) in styles.items():
         mean = np.array([c["error_cm"][name][0] for c in curve])
-        ax.plot(steps, mean, "o-", color=color, label=label, ms=4)
+        ax.plot(lstm_steps, mean, "o-", color=color, label=label, ms=4)
         ax.axhline(PAPER_ERROR_CM[name], color=color, ls=":", lw=1)
         if all("other_trajectories" in c for c in curve):
             other = [c["other_trajectories"]["error_cm"][name][0] for c in curve]
-            ax.plot(steps, other, "s--", color=color, ms=3, lw=1, alpha=0.7,
+            ax.plot(lstm_steps, other, "s--", color=color, ms=3, lw=1, alpha=0.7,
                     label=f"{label}, other trajectories' frames")
     ax.set_xscale("symlog", linthresh=100)
     ax.set_xlabel("LSTM training steps (0: the shared initialisation)")

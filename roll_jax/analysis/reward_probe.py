@@ -52,7 +52,7 @@ def reward_latents(loaded, seed_index: int = 0):
     """images [B, 48, 48, 3] -> the run's reward latents [B, g] (seed `seed_index`)."""
     cfg = loaded.cfg
     enc = goal_encoder(cfg)
-    if enc.oracle:
+    if not enc.from_pixels:
         raise ValueError(f"{cfg.algo} run: the oracle's reward uses true states, not images")
     # Only the encoders' leaves of that seed (not the replay buffer's), passed as arguments
     # rather than baked into the program as constants.

@@ -5,6 +5,7 @@ rewards), how a run turns images into those latents, and their pretraining.
     losses         beta-VAE, VAE matching and LSTM auto-encoder + matching losses
     steps          train states and pure train steps / epochs of the VAEs and the LSTM
     goal_encoding  GoalEncoder: images -> observation, goal and achieved latents per algorithm
+    oracle         StateOracle: the same contract with true positions for latents
     pretrain       datasets, pretraining, encoder checkpoints (`python -m ...pretrain`)
 """
 
@@ -16,6 +17,7 @@ __all__, __getattr__, __dir__ = lazy_api(__name__, {
     ".steps": ("ModelState", "init_vae", "init_lstm", "vae_train_step", "lstm_train_step",
                "vae_fit_epoch", "lstm_fit_epoch", "make_occlusion", "OcclusionSource"),
     ".goal_encoding": ("Frozen", "GoalEncoder", "goal_encoder"),
+    ".oracle": ("StateOracle",),
     ".pretrain": ("Pretrained", "pretrain", "save", "load", "initial",
                   "fit_or_load_segmentation"),
 })

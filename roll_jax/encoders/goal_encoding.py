@@ -6,16 +6,19 @@ scene-VAE encodes the (unsegmented) image for the LSTM; no matching loss -> same
 trained without it, neither the LSTM's nor the object-VAE's ("does not add the matching loss
 to the LSTM output or the object-VAE latent embedding"); no LSTM also drops the object-VAE's
 matching loss (the paper's "ROLL without LSTM and matching loss"). Skew-Fit: the scene-VAE
-encodes everything and goals come from the skewed replay buffer (loop.fresh_goals).
+encodes everything and goals come from the skewed replay buffer (agents/her.py). The state
+oracle (`--algo oracle`) is another encoder with the same contract: `oracle.StateOracle`.
 
 `GoalEncoder` is a static description (built from the config, hashable); its methods are pure
-functions of explicit parameters so that the loop, evaluation and analysis share them.
+functions of explicit parameters so that the loop, evaluation and analysis share them. What
+the training loop calls: `observe` (each step), `encode_episodes` (each finished episode),
+`goal_bank` (each chunk's prior goals), `test_goal_images` / `encode_goals` (test goals).
 """
 
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
+from typing import Any, ClassVar
 
 import jax
 import jax.numpy as jnp
@@ -24,7 +27,14 @@ from flax import struct
 from configs.encoders import VAEConfig
 from roll_jax.encoders import models
 from roll_jax.encoders.models import lstm_encode
+from roll_jax.encoders.oracle import StateOracle
 from roll_jax.segmentation import pipeline
+
+# ROLL's prior goals per chunk: N(0, I) samples through the LSTM, drawn once per chunk (the
+# LSTM does not change while a chunk collects and updates SAC). Encoding 128 fresh ones for
+# each of the chunk's updates cost as much as the SAC update itself (1.3 ms per update on a
+# 2-core CPU); each update now draws its rows from this bank.
+PRIOR_BANK = 4096
 
 
 @struct.dataclass
@@ -44,14 +54,22 @@ class GoalEncoder:
     segment: bool  # segment images before the frame encoder
     lstm: bool  # run the LSTM over the per-frame latents
     # Fresh goals (exploration, HER's fresh share) from the replay buffer skewed by p(x)^alpha
-    # (Skew-Fit) instead of the prior (ROLL's Algorithm 1); see loop.fresh_goals.
+    # (Skew-Fit) instead of the prior (ROLL's Algorithm 1); see her.fresh_goals.
     skewed_goals: bool = False
-    # The state oracle: true hand and object positions instead of latents, the true distance as
-    # reward, nothing rendered for learning (loop.oracle_obs / oracle_goal).
-    oracle: bool = False
     # Achieved goals frame by frame (one LSTM step from the zero state, like a goal image)
     # instead of the LSTM over the episode (TrainConfig.achieved_encoding).
     achieved_single: bool = False
+    from_pixels: ClassVar[bool] = True  # (the state oracle's is False)
+
+    @property
+    def image_shape(self) -> tuple[int, ...]:
+        """The replay buffer's image shape: the scene images."""
+        return self.scene_cfg.image_shape
+
+    def latent_dims(self, env) -> tuple[int, int, int]:
+        """(observation, goal, per-frame) latent sizes."""
+        del env
+        return self.scene_cfg.latent_dim, self.goal_dim, self.frame_dim
 
     @property
     def frame_dim(self) -> int:
@@ -108,11 +126,48 @@ class GoalEncoder:
             z = stats[0] + stats[1] * z
         return self.single(lstm_params, z)
 
+    # --- what the training loop and the evaluation call (StateOracle has the same) -----------
 
-def goal_encoder(cfg) -> GoalEncoder:
-    """The GoalEncoder of a TrainConfig (algo + ablation flags)."""
+    def observe(self, env, scene_params, states, show=None):
+        """(the policy's observations [N, ds]: scene-VAE means of the rendered frames, what
+        an episode keeps of the step: the frames [N, 48, 48, 3], the frames of the envs
+        `show` picks: None, an index or a slice) of env states [N]."""
+        rgb = jax.vmap(env.render)(states)
+        z = models.encode_mean(scene_params, self.scene_cfg, rgb)
+        return z, rgb, None if show is None else rgb[show]
+
+    def encode_episodes(self, frozen, scene_params, lstm_params, records):
+        """(images, goal images, frame latents, achieved goals) of episodes whose steps kept
+        `records`: their frames [E, T+1, 48, 48, 3], segmented (`goal_images`) and encoded
+        (`frame_latents`, `achieved`)."""
+        goal_imgs = self.goal_images(frozen, records)
+        frame_lat = self.frame_latents(frozen, scene_params, goal_imgs)
+        achieved = jax.vmap(lambda f: self.achieved(lstm_params, f))(frame_lat)
+        return records, goal_imgs, frame_lat, achieved
+
+    def goal_bank(self, env, key, lstm_params, stats=None):
+        """What a chunk's prior goals are drawn from: PRIOR_BANK `prior_goals`; None for
+        Skew-Fit (its goals come from the buffer)."""
+        del env
+        if self.skewed_goals:
+            return None
+        return self.prior_goals(key, lstm_params, PRIOR_BANK, stats)
+
+    def test_goal_images(self, env, states):
+        """The goal images [G, 48, 48, 3] of goal env states [G]."""
+        return jax.vmap(env.render)(states)
+
+    def encode_goals(self, env, frozen, scene_params, lstm_params, rgb, states):
+        """The goals [G, goal_dim] of goal images rgb [G, 48, 48, 3] (`encode_goal_images`;
+        their env `states` are not used: a user's goal image has none)."""
+        del env, states
+        return self.encode_goal_images(frozen, scene_params, lstm_params, rgb)
+
+
+def goal_encoder(cfg) -> GoalEncoder | StateOracle:
+    """The GoalEncoder of a TrainConfig (algo + ablation flags); the state oracle's."""
     if cfg.algo == "oracle":
-        return GoalEncoder(cfg.scene, None, segment=False, lstm=False, oracle=True)
+        return StateOracle()
     if cfg.algo == "skewfit":
         return GoalEncoder(cfg.scene, None, segment=False, lstm=False, skewed_goals=True)
     if not cfg.use_object_vae:

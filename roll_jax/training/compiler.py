@@ -1,5 +1,6 @@
-"""JAX's persistent compilation cache: a second run of the same config loads its compiled
-programs (the training chunk is the largest: about a minute to compile on a 2-core CPU).
+"""How programs are compiled: JAX's persistent compilation cache (a second run of the same
+config loads its compiled programs; the training chunk is the largest: about a minute to
+compile on a 2-core CPU) and the training chunk's own XLA:CPU options.
 
 `train.py` uses `default_dir()` unless `--compile-cache off` (or a directory) is given; the
 reproduction grid keeps its own in DIR/.jax_cache. A cache configured earlier in the process
@@ -67,3 +68,26 @@ def accepted_options(options: tuple[tuple[str, object], ...]) -> dict | None:
             continue
         kept[name] = value
     return kept or None
+
+
+# XLA:CPU options for the chunk alone: the older elemental emitters and LLVM at -O1 compile
+# the cpu preset's chunk faster and it runs faster; without the YNNPACK fusions its SAC
+# updates run faster and its online LSTM steps slower, the chunk faster in all
+# (docs/training.md#compiling). The other programs keep XLA's defaults (the VAE and U-Net
+# train steps run slower with the emitters and without YNNPACK).
+CHUNK_CPU_COMPILER_OPTIONS = (("xla_cpu_use_fusion_emitters", False),
+                              ("xla_backend_optimization_level", 1),
+                              ("xla_cpu_experimental_ynn_fusion_type", ""))
+
+
+def chunk_compiler_options() -> dict | None:
+    """The chunk's `compiler_options`: CHUNK_CPU_COMPILER_OPTIONS on a CPU backend (where the
+    installed jaxlib accepts them), XLA's defaults elsewhere. An option the process's
+    XLA_FLAGS sets is left to XLA_FLAGS (a per-program option would override it)."""
+    import jax
+
+    if jax.default_backend() != "cpu":
+        return None
+    flags = os.environ.get("XLA_FLAGS", "")
+    options = tuple((k, v) for k, v in CHUNK_CPU_COMPILER_OPTIONS if f"--{k}" not in flags)
+    return accepted_options(options) if options else None

@@ -2,7 +2,7 @@
 
 `run(cfg, out, ...)` is what `train.py` calls. Every `eval_every_epochs`-th chunk also
 evaluates the policy it starts from (test envs in the collection batch,
-`loop.collect_episode`; the other chunks run a program without them); between chunks Python logs
+`collect.collect_episode`; the other chunks run a program without them); between chunks Python logs
 metrics.csv, checkpoints (orbax, the whole train state including the replay buffer), plots the
 learning curve and drives the progress bar; at the end it writes timings.json (wall and CPU
 seconds per phase; the first chunk's include its compile). Seeds are the state's leading
@@ -29,6 +29,7 @@ from roll_jax.encoders.goal_encoding import Frozen, goal_encoder
 from roll_jax.training import loop, plots, run_dir
 from roll_jax.training import sharding as shd
 from roll_jax.training.run_dir import COMPLETE_MARKER, check_resume
+from roll_jax.training.state import TrainState, eval_only_plan, init_state, plan_chunk
 
 LOSS_KEYS = ("q_loss", "policy_loss", "alpha_loss", "vae_loss", "lstm_loss")
 class TrainingDiverged(RuntimeError):
@@ -48,7 +49,7 @@ def check_finite(train: dict, env_steps: int, epoch: int, ckpt: str) -> None:
                 f"{epoch}); the last good checkpoint in {ckpt} is kept")
     if "finite" in train:
         flag = np.asarray(train["finite"], np.float64)
-        if not np.all(flag == 1.0):  # (1 in a chunk without updates: loop.zero_sac_metrics)
+        if not np.all(flag == 1.0):  # (1 in a chunk without updates: her.zero_sac_metrics)
             bad = int(np.argmax(flag != 1.0))
             raise TrainingDiverged(
                 f"a SAC gradient was NaN/inf for seed {bad} at env step {env_steps} (epoch "
@@ -105,7 +106,7 @@ def setup(cfg: TrainConfig, env, key, out: str, seg_ckpt=None, enc_ckpt=None, pr
                 cfg, env, seg_ckpt or os.path.join(out, "segmentation"), k_seg)
     enc_path = enc_ckpt or os.path.join(out, "encoders")
     with times("pretrain"):
-        if enc.oracle:  # no encoders: the untrained scene-VAE only fills the state's slot
+        if not enc.from_pixels:  # the oracle: the untrained scene-VAE only fills the slot
             pre = pretrain.initial(cfg, k_pre)
         elif os.path.exists(os.path.join(enc_path, "meta.json")):
             pre = pretrain.load(enc_path, cfg)
@@ -131,13 +132,13 @@ def compile_in_background(fn, *args):
 
 
 def init_seeds(cfg: TrainConfig, env, key, pre: pretrain.Pretrained,
-               sharding: shd.SeedSharding | None = None) -> loop.TrainState:
+               sharding: shd.SeedSharding | None = None) -> TrainState:
     """[seeds]-batched train state; every seed starts from the same pre-trained encoders."""
     return init_states(cfg, env, jax.random.split(key, cfg.seeds), pre, sharding)
 
 
 def init_states(cfg: TrainConfig, env, keys, pre: pretrain.Pretrained,
-                sharding: shd.SeedSharding | None = None) -> loop.TrainState:
+                sharding: shd.SeedSharding | None = None) -> TrainState:
     """One seed per key [S, 2]. With a `sharding` each device builds its own seeds' state
     (nothing gathered on one device)."""
     if sharding is None:
@@ -153,7 +154,7 @@ def init_states(cfg: TrainConfig, env, keys, pre: pretrain.Pretrained,
 def _init_fn(cfg: TrainConfig, env, out_shardings):
     """jit of the seeds' initial states, built once per config (like `loop.compile_chunk`);
     the encoders are arguments, not constants baked into the program."""
-    init = jax.vmap(lambda k, vae, lstm: loop.init_state(k, cfg, env, vae, lstm),
+    init = jax.vmap(lambda k, vae, lstm: init_state(k, cfg, env, vae, lstm),
                     in_axes=(0, None, None))
     return jax.jit(init) if out_shardings is None else jax.jit(init, out_shardings=out_shardings)
 
@@ -223,7 +224,7 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
     if cfg.eval_every_epochs > 1 and any(
             e % cfg.eval_every_epochs for e in range(start_epoch, end_epoch)):
         chunks[False] = compile_in_background(chunks[False], state, frozen,
-                                              loop.plan_chunk(cfg, start_epoch))
+                                              plan_chunk(cfg, start_epoch))
     if sharding is not None:
         chunks = {ev: sharding.wrap_chunk(c) for ev, c in chunks.items()}
 
@@ -248,7 +249,7 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
                disable=not (progress and main), initial=start_epoch, total=cfg.n_epochs)
     t_last, steps_last = time.perf_counter(), start_epoch * cfg.epoch_env_steps
     for epoch in bar:
-        plan = loop.plan_chunk(cfg, epoch)
+        plan = plan_chunk(cfg, epoch)
         evaluate = epoch % cfg.eval_every_epochs == 0
         with times("chunks"):  # the first of each program includes tracing and compiling it
             state, metrics = chunks[evaluate](state, frozen, plan)
@@ -271,7 +272,7 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
         # The final policy: one more chunk that only collects (and evaluates); its state is
         # dropped, the checkpoint above is the run's end.
         with times("final_eval"):
-            _, metrics = chunks[True](state, frozen, loop.eval_only_plan())
+            _, metrics = chunks[True](state, frozen, eval_only_plan())
             metrics = shd.to_host(metrics)
         log_evaluation(cfg.total_env_steps, metrics["eval"])
     mgr.wait_until_finished()

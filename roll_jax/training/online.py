@@ -1,7 +1,8 @@
 """Online encoder training inside the chunk (Algorithm 1, appendix "Training schedules"):
 the scene-VAE on Skew-Fit-skewed replay images, the LSTM on replay trajectories
 (auto-encoder + matching loss), and the recomputation of the buffer's cached latents after
-either. `state` is the chunk's `loop.TrainState`."""
+either. `state` is the chunk's `state.TrainState`; `train_encoders` is the chunk's round of
+all three as its `ChunkPlan` schedules them."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from configs.train import TrainConfig
 from roll_jax.agents import replay, skewfit
 from roll_jax.encoders import models, steps
 from roll_jax.encoders.goal_encoding import Frozen, GoalEncoder
+from roll_jax.training.state import ChunkPlan, lstm_params_of
 
 
 def train_scene_vae(cfg: TrainConfig, state, key, n_batches):
@@ -84,7 +86,8 @@ def refresh_scene(cfg: TrainConfig, enc: GoalEncoder, state):
     """After scene-VAE training: the buffer's scene latents, and its frame latents where the
     scene-VAE encodes the goal frames (the same images: no-object-VAE, Skew-Fit)."""
     params = state.scene_vae.params
-    buf = replay.recompute(state.buffer, "obs_latents", lambda x: models.encode_mean(params, cfg.scene, x),
+    buf = replay.recompute(state.buffer, "obs_latents",
+                           lambda x: models.encode_mean(params, cfg.scene, x),
                            state.buffer.images, REFRESH_CHUNK)
     if enc.object_cfg is None:
         buf = buf.replace(frame_latents=buf.obs_latents)
@@ -94,7 +97,33 @@ def refresh_scene(cfg: TrainConfig, enc: GoalEncoder, state):
 def refresh_goals(enc: GoalEncoder, state):
     """The buffer's goal latents from its cached frame latents (`enc.achieved` of each episode;
     no image is encoded: the frame latents change only with `refresh_scene`)."""
-    lstm_params = None if state.lstm is None else state.lstm.params
+    lstm_params = lstm_params_of(state)
     buf = replay.recompute(state.buffer, "goal_latents", lambda e: enc.achieved(lstm_params, e),
                            state.buffer.frame_latents, GOAL_REFRESH_CHUNK)
     return state.replace(buffer=buf)
+
+
+def train_encoders(cfg: TrainConfig, enc, frozen: Frozen, state, plan: ChunkPlan, keys):
+    """The chunk's online encoder training after its collection, as `plan` schedules it:
+    scene-VAE batches then the buffer's scene latents (`keys[0]`; never for the state
+    oracle, nor with cfg.vae_schedule "none"), LSTM batches (`keys[1]`), the goal-latent
+    refresh -> (state, {"vae_loss", "lstm_loss" with an LSTM})."""
+    k_vae, k_lstm = keys
+    metrics = {"vae_loss": jnp.float32(0)}
+    if enc.from_pixels and cfg.vae_schedule != "none":
+        def vae_round(s):
+            s, m = train_scene_vae(cfg, s, k_vae, plan.vae_batches)
+            return refresh_scene(cfg, enc, s), m
+
+        state, metrics = jax.lax.cond(plan.vae_batches > 0, vae_round,
+                                      lambda s: (s, {"vae_loss": jnp.float32(0)}), state)
+    if enc.lstm:
+        state, lstm_m = jax.lax.cond(
+            plan.lstm_batches > 0,
+            lambda s: train_lstm(cfg, enc, frozen, s, k_lstm, plan.lstm_batches),
+            lambda s: (s, {"lstm_loss": jnp.float32(0)}), state)
+        metrics = {**metrics, **lstm_m}
+    if enc.from_pixels:
+        state = jax.lax.cond(plan.refresh_goals, lambda s: refresh_goals(enc, s),
+                             lambda s: s, state)
+    return state, metrics
