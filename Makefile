@@ -25,8 +25,11 @@ TEST_WORKERS ?= 2
 test: $(STAMP)
 	$(VENV)/bin/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder --durations=15
 
+# One benchmark of the suite: make bench NAME=chunk ARGS="--seeds 1" (python -m bench lists them).
+NAME ?= envs
+ARGS ?=
 bench: $(STAMP)
-	$(VENV)/bin/python bench/envs.py
+	$(VENV)/bin/python -m bench $(NAME) $(ARGS)
 
 clean:
 	rm -rf $(VENV) runs .jax_cache

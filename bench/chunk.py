@@ -24,7 +24,7 @@
                batch size on the replay buffer the timed chunks filled;
      lstm      --lstm-batches online LSTM batches on that buffer and the goal-latent refresh
                (nothing with --lstm-batches 0);
-   the shares are of the sum of these parts. "collect" (`loop.collect_episode` per episode,
+   the shares are of the sum of these parts. "collect" (`collect.collect_episode` per episode,
    the chunk's collection phase as one function, without the replay write) is timed too,
    for comparison (--no-collect skips it).
 
@@ -40,66 +40,40 @@ its short path as in a run). The chunk plan is the steady state after
 default (--vae-batches / --lstm-batches switch it on; the compiled chunk holds those branches
 either way).
 
-    python bench/train.py [--task puck_push] [--seeds 1 6] [--preset paper]
-        [--epoch-env-steps 500] [--n-envs 10] [--chunks 3] [--out bench/results/train.json]
-    # the CPU run of bench/results/train.json (2 shared cores, ~14 min):
-    python bench/train.py --n-envs 1 --epoch-env-steps 50 --chunks 3 --reps 1 \
+    python -m bench chunk [--task puck_push] [--seeds 1 6] [--preset paper]
+        [--epoch-env-steps 500] [--n-envs 10] [--chunks 3]
+    # on a 2-core CPU (~14 min):
+    python -m bench chunk --n-envs 1 --epoch-env-steps 50 --chunks 3 --reps 1 \
         --replay-size 10000 --no-collect
 
-Writes bench/results/train.json (device, jax version, sizes, figures).
+Writes bench/results/chunk.json (sizes, figures).
 """
 from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import os
 import statistics
-import sys
 import time
-
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-
-from bench.common import machine_info, write_results  # noqa: E402
 
 import jax
 import jax.numpy as jnp
 
 import envs_mjx
+from bench.common import machine_info, result_path, write_result
 from configs.presets import PRESETS
 from configs.train import make_config
-from roll_jax.agents import sac, skewfit
-from roll_jax.encoders import steps
-from roll_jax.training import loop, online, sharding
+from roll_jax.agents import her, sac, skewfit
+from roll_jax.encoders import models, steps
 from roll_jax.encoders.goal_encoding import Frozen, goal_encoder
 from roll_jax.segmentation import mog2, pipeline, unet
-
-RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "train.json")
+from roll_jax.training import loop, online, sharding
+from roll_jax.training.collect import ChunkInputs, Collector, collect_episode
+from roll_jax.training.state import ChunkPlan, init_state, lstm_params_of, plan_chunk
 PARTS = ("sim", "render", "segment", "encoders", "log_p", "policy", "sac", "lstm")
 
 
 # ----------------------------------------------------------------------------- helpers
-
-def _git_info() -> dict:
-    """Commit of the checkout and whether the files the chunk runs differ from it."""
-    import hashlib
-    import subprocess
-
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-
-    def git(*args):
-        try:
-            return subprocess.run(("git",) + args, cwd=root, capture_output=True, text=True,
-                                  check=False, timeout=30).stdout.strip()
-        except (OSError, subprocess.SubprocessError):
-            return ""
-
-    with open(os.path.join(root, "roll_jax", "loop.py"), "rb") as f:
-        loop_sha = hashlib.sha256(f.read()).hexdigest()[:12]
-    return {"commit": git("rev-parse", "--short", "HEAD"),
-            "modified_files": git("status", "--porcelain", "--untracked-files=no").splitlines(),
-            "loop_py_sha256_12": loop_sha}
-
 
 def _block(x):
     return jax.block_until_ready(x)
@@ -202,13 +176,13 @@ def steady_chunk_inputs(task: str, preset: str, first_epoch: int = 20, seeds: in
     frozen, scene_vae, lstm = fresh_frozen_and_pretrained(cfg, k_fz)
 
     def init_one(k):
-        st = loop.init_state(k, cfg, env, scene_vae, lstm)
+        st = init_state(k, cfg, env, scene_vae, lstm)
         if full_buffer:
             st = st.replace(buffer=st.buffer.replace(size=jnp.int32(st.buffer.capacity)))
         return st
 
     init = jax.jit(jax.vmap(init_one))
-    plans = [(e, loop.plan_chunk(cfg, e))
+    plans = [(e, plan_chunk(cfg, e))
              for e in range(first_epoch, first_epoch + cfg.refresh_every_epochs)]
     return cfg, env, frozen, lambda: init(jax.random.split(k_init, seeds)), plans
 
@@ -356,11 +330,11 @@ def part_functions(cfg, env, frozen, lstm_batches: int = 0):
             rgb_ep, g_ep, k = xs  # [E, T+1, ...]
 
             def step(_, frame):  # the policy's observation, one step of all envs
-                return None, loop.scene_latents(cfg, scene_params, frame)
+                return None, models.encode_mean(scene_params, cfg.scene, frame)
 
             _, z_steps = jax.lax.scan(step, None, rgb_ep[:, :t].swapaxes(0, 1))
             goals = enc.prior_goals(k, lstm_params, e)
-            obs = loop.scene_latents(cfg, scene_params, rgb_ep)
+            obs = models.encode_mean(scene_params, cfg.scene, rgb_ep)
             achieved = jax.vmap(lambda f: enc.sequence(lstm_params, f))(
                 enc.frame_latents(fz, scene_params, g_ep))
             return None, (z_steps.sum(), goals.sum(), obs.sum(), achieved.sum())
@@ -385,27 +359,31 @@ def part_functions(cfg, env, frozen, lstm_batches: int = 0):
 
         return jax.lax.scan(episode, None, (z_steps, goals, jax.random.split(key, n_ep)))[1]
 
-    def prior_of(state, key):  # the chunk's prior-goal bank (loop.goal_prior)
-        return loop.goal_prior(cfg, enc, env, state.buffer, key, loop.lstm_params_of(state))
+    def prior_of(state, key):  # the chunk's prior-goal bank (her.goal_prior)
+        return her.goal_prior(cfg, enc, env, state.buffer, key, lstm_params_of(state))
 
     def sac_one(state, key):
         k_bank, k = jax.random.split(key)
         s, m = loop.sac_updates(cfg, enc, state, k, n_updates, prior_of(state, k_bank))
         return s.sac, m
 
+    collector = Collector(cfg, env, enc, evaluate=True)
+
     def collect_one(fz, state, key, act_random):
         k_bank, key = jax.random.split(key)
-        prior = prior_of(state, k_bank)
+        # SAC off: the collection phase alone (with sac_schedule "step" the updates would run
+        # inside it; they are timed by "sac").
+        plan = ChunkPlan(learn=jnp.bool_(False), act_random=act_random,
+                         vae_batches=jnp.int32(0), lstm_batches=jnp.int32(0),
+                         refresh_goals=jnp.bool_(False))
+        inputs = ChunkInputs(frozen=fz, plan=plan, bank=prior_of(state, k_bank),
+                             eval_policy=state.sac.policy_params)
 
         def episode(s, k):
-            # SAC off: the collection phase alone (with sac_schedule "step" the updates
-            # would run inside it; they are timed by "sac").
-            out = loop.collect_episode(cfg, env, enc, fz, s, k, act_random, prior,
-                                       jnp.bool_(False))
-            es, traj, m = out[0], out[1:-1], out[-1]  # (es, traj[, log_p], metrics)
+            ep = collect_episode(collector, inputs, s, k, 0)
             # Reductions of every trajectory field keep all of it alive (no dead code).
-            sums = jax.tree.map(lambda x: jnp.sum(x.astype(jnp.float32)), traj)
-            return s.replace(env_state=es), (m, sums)
+            sums = jax.tree.map(lambda x: jnp.sum(x.astype(jnp.float32)), (ep.traj, ep.log_p))
+            return s.replace(env_state=ep.env_state), (ep.metrics, ep.test, sums)
 
         s, out = jax.lax.scan(episode, state, jax.random.split(key, n_ep))
         return s.env_state, out
@@ -438,13 +416,13 @@ def bench_seeds(a, seeds: int, env) -> dict:
     key = jax.random.PRNGKey(a.seed)
     k_fz, k_init, k_parts = jax.random.split(key, 3)
     frozen, scene_vae, lstm = fresh_frozen_and_pretrained(cfg, k_fz)
-    state = jax.jit(jax.vmap(lambda k: loop.init_state(k, cfg, env, scene_vae, lstm)))(
+    state = jax.jit(jax.vmap(lambda k: init_state(k, cfg, env, scene_vae, lstm)))(
         jax.random.split(k_init, seeds))
     _block(state)
-    plan = loop.ChunkPlan(learn=jnp.bool_(True), act_random=jnp.bool_(False),
-                          vae_batches=jnp.int32(a.vae_batches),
-                          lstm_batches=jnp.int32(a.lstm_batches),
-                          refresh_goals=jnp.bool_(a.lstm_batches > 0 or a.vae_batches > 0))
+    plan = ChunkPlan(learn=jnp.bool_(True), act_random=jnp.bool_(False),
+                     vae_batches=jnp.int32(a.vae_batches),
+                     lstm_batches=jnp.int32(a.lstm_batches),
+                     refresh_goals=jnp.bool_(a.lstm_batches > 0 or a.vae_batches > 0))
     steps_per_chunk = seeds * cfg.epoch_env_steps
     n_updates = cfg.epoch_env_steps * cfg.sac.updates_per_step
     print(f"\n== {cfg.task}, {seeds} seed(s): {cfg.n_envs} envs x {cfg.episodes_per_epoch} "
@@ -495,7 +473,7 @@ def bench_seeds(a, seeds: int, env) -> dict:
     template = jax.tree.map(lambda x: x[0, 0], state.env_state)
     parts["render"], rgb = _time_part("render", fns["render"], (template, poses), a.reps)
     parts["segment"], goal_imgs = _time_part("segment", fns["segment"], (frozen, rgb), a.reps)
-    lstm_params = loop.lstm_params_of(state)
+    lstm_params = lstm_params_of(state)
     parts["encoders"], _ = _time_part(
         "encoders", fns["encoders"],
         (frozen, state.scene_vae.params, lstm_params, rgb, goal_imgs, keys[1]), a.reps)
@@ -588,11 +566,14 @@ def table(results: list[dict]) -> str:
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(description=__doc__,
+    p = argparse.ArgumentParser(prog="python -m bench chunk", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--task", default="puck_push", choices=envs_mjx.TASK_NAMES)
-    p.add_argument("--seeds", type=int, nargs="+", default=[1, 6])
-    p.add_argument("--preset", default="paper", choices=PRESETS)
+    p.add_argument("--task", default="puck_push", choices=envs_mjx.TASK_NAMES,
+                   help="the task (default puck_push)")
+    p.add_argument("--seeds", type=int, nargs="+", default=[1, 6],
+                   help="seed counts, one chunk program each (default 1 6)")
+    p.add_argument("--preset", default="paper", choices=PRESETS,
+                   help="the networks' preset (default paper)")
     p.add_argument("--epoch-env-steps", type=int, default=None,
                    help="env steps per seed per chunk, a multiple of n_envs x horizon "
                    "(default: the preset's, 500 for paper)")
@@ -612,9 +593,10 @@ def main(argv=None):
     p.add_argument("--seed-batch", default="auto",
                    help="seeds vmapped together in the chunk, the rest mapped (as train.py; "
                         "auto: 1 on CPU, all on GPU)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--out", default=RESULTS)
+    p.add_argument("--seed", type=int, default=0, help="PRNG seed (default 0)")
+    p.add_argument("--out", default=result_path("chunk"), help="result file")
     a = p.parse_args(argv)
+    machine = machine_info()
     env = envs_mjx.make(a.task)
     preset = make_config(a.task, "roll", a.preset)
     a.n_envs = preset.n_envs if a.n_envs is None else a.n_envs
@@ -627,9 +609,7 @@ def main(argv=None):
         p.error(str(e))
     t0 = time.perf_counter()
     res = {
-        **machine_info(),
-        "task": a.task, "preset": a.preset, "git": _git_info(),
-        "args": vars(a),
+        "task": a.task, "preset": a.preset, "args": vars(a),
         "note": ("whole chunk = loop.compile_chunk (the training code path), compile timed "
                  "apart (AOT lower + compile), steady state = median of chunks 2.."
                  "--chunks; parts = each its own jitted function at one chunk's sizes, median of at "
@@ -648,7 +628,7 @@ def main(argv=None):
     print()
     print(table(res["runs"]))
     print(f"\nwall {res['wall_s']:.0f} s; load average {list(os.getloadavg())}")
-    write_results(a.out, res)
+    write_result("chunk", res, machine, argv, a.out)
 
 
 if __name__ == "__main__":

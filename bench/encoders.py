@@ -13,7 +13,7 @@ Steps run inside one jitted `lax.scan` of K steps (how pre-training and the trai
 them), timed after a warm-up call, best of a few repeats. Architectures and batch sizes are the
 paper's whatever the machine; latent sizes from hurdle_top (scene 6, object 6).
 
-    python bench/encoders.py [--quick]
+    python -m bench encoders [--quick]
 
 Writes bench/results/encoders.json.
 """
@@ -22,23 +22,17 @@ from __future__ import annotations
 import argparse
 import functools
 import json
-import os
-import sys
 import time
-
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-
-from bench.common import machine_info, time_best, write_results  # noqa: E402
 
 import jax
 import jax.numpy as jnp
 
+from bench.common import machine_info, result_path, time_best, write_result
 from configs.encoders import lstm_config, object_vae_config, scene_vae_config
 from roll_jax.encoders import models, steps
 from roll_jax.encoders.goal_encoding import GoalEncoder
 from roll_jax.encoders.models import lstm_encode
 
-RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "encoders.json")
 TASK = "hurdle_top"
 
 
@@ -134,11 +128,12 @@ def bench_encode(scfg, vcfg, lcfg, batch: int, key) -> dict:
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(description=__doc__,
+    p = argparse.ArgumentParser(prog="python -m bench encoders", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--quick", action="store_true", help="fewer steps per timed call")
-    p.add_argument("--out", default=RESULTS)
+    p.add_argument("--out", default=result_path("encoders"), help="result file")
     a = p.parse_args(argv)
+    machine = machine_info()
     k = 5 if a.quick else 10
     key = jax.random.PRNGKey(0)
     scfg = scene_vae_config(TASK)
@@ -146,7 +141,6 @@ def main(argv=None):
     lcfg = lstm_config(TASK)
     t0 = time.perf_counter()
     res = {
-        **machine_info(),
         "task_configs": TASK,
         "note": ("steps/s of one jitted lax.scan of K train steps (Adam included), best of "
                  "repeats after a warm-up call; synthetic data (random images for the scene-VAE, "
@@ -164,7 +158,7 @@ def main(argv=None):
     res["encode"] = bench_encode(scfg, vcfg, lcfg, 1024, key)
     print("encode     ", json.dumps(res["encode"]), flush=True)
     res["wall_s"] = time.perf_counter() - t0
-    write_results(a.out, res)
+    write_result("encoders", res, machine, argv, a.out)
 
 
 if __name__ == "__main__":

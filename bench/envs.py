@@ -6,16 +6,13 @@ of the same model with the same action semantics (the reference; ratio printed).
 object-position error between MJX and C MuJoCo on the scripted sequences and on longer
 random-action sequences. Writes bench/results/envs.json.
 
-    python bench/envs.py                      # CPU: N = 1, 64, 512
-    python bench/envs.py --n 1 64 512 4096    # GPU
+    python -m bench envs                      # CPU: N = 1, 64, 512
+    python -m bench envs --n 1 64 512 4096    # GPU
 """
 
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import platform
 import time
 
 import jax
@@ -23,6 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import envs_mjx
+from bench.common import machine_info, read_figures, result_path, write_result
 from envs_mjx.reference import CReference
 from envs_mjx.rollout import random_actions, rollout
 from envs_mjx.scripts import SCRIPTS
@@ -71,24 +69,19 @@ def parity(env, actions, s0) -> float:
     return err
 
 
-def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__)
-    p.add_argument("--tasks", nargs="+", default=list(envs_mjx.TASK_NAMES))
-    p.add_argument("--n", nargs="+", type=int, default=[1, 64, 512])
+def main(argv=None) -> None:
+    p = argparse.ArgumentParser(prog="python -m bench envs", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--tasks", nargs="+", default=list(envs_mjx.TASK_NAMES), help="tasks to time")
+    p.add_argument("--n", nargs="+", type=int, default=[1, 64, 512], help="parallel envs")
     p.add_argument("--steps", type=int, default=20, help="env steps per timed rollout")
-    p.add_argument("--parity-steps", type=int, default=200)
-    p.add_argument("--out", default=os.path.join(os.path.dirname(__file__), "results", "envs.json"))
-    args = p.parse_args()
-
-    results = {"device": str(jax.devices()[0]), "backend": jax.default_backend(),
-               "machine": platform.processor() or platform.machine(),
-               "cpu_count": os.cpu_count(), "jax": jax.__version__, "steps": args.steps,
-               "tasks": {}}
-    if os.path.exists(args.out):  # keep other tasks' figures from an earlier (partial) run
-        with open(args.out) as f:
-            previous = json.load(f)
-        if previous.get("device") == results["device"]:
-            results["tasks"] = previous.get("tasks", {})
+    p.add_argument("--parity-steps", type=int, default=200,
+                   help="steps of the MJX / C MuJoCo parity sequences")
+    p.add_argument("--out", default=result_path("envs"), help="result file")
+    args = p.parse_args(argv)
+    machine = machine_info()
+    # other tasks' figures from an earlier (partial) run on the same device are kept
+    figures = {"steps": args.steps, "tasks": read_figures(args.out, machine).get("tasks", {})}
     for task in args.tasks:
         env = envs_mjx.make(task)
         c_sps = c_mujoco_throughput(env, 500)
@@ -108,11 +101,9 @@ def main() -> None:
         print(f"{task:14s} parity vs C MuJoCo over {args.parity_steps} steps: scripted "
               f"{row['parity_scripted_max_err'] * 1000:.2f} mm, random "
               f"{row['parity_random_max_err'] * 1000:.2f} mm (door: mrad)", flush=True)
-        results["tasks"][task] = row
-        os.makedirs(os.path.dirname(args.out), exist_ok=True)
-        with open(args.out, "w") as f:  # after every task, so a cut-off run keeps its figures
-            json.dump(results, f, indent=2)
-    print(f"wrote {args.out}")
+        figures["tasks"][task] = row
+        # after every task, so a cut-off run keeps its figures
+        write_result("envs", figures, machine, argv, args.out)
 
 
 if __name__ == "__main__":

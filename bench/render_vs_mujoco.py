@@ -12,27 +12,29 @@ Finally it times the JAX renderer (48x48, jit, 1 env and vmapped over 64 envs) o
 scene and the task scenes, next to MuJoCo's OSMesa renderer on the same scene as a reference
 (the load average is recorded: timings on a shared CPU are noisy; the best of several runs is kept).
 
-Run: MUJOCO_GL=osmesa PYOPENGL_PLATFORM=osmesa python bench/render_vs_mujoco.py
-(needs the Debian package libosmesa6). Writes bench/results/render_vs_mujoco.json.
+    MUJOCO_GL=osmesa PYOPENGL_PLATFORM=osmesa python -m bench render_vs_mujoco [--states 20]
+
+(needs the Debian package libosmesa6; the two variables are set here when unset). Writes
+bench/results/render_vs_mujoco.json.
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
-import sys
 import time
 
 os.environ.setdefault("MUJOCO_GL", "osmesa")
 os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
 os.environ.setdefault("JAX_PLATFORMS", "cpu")
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
+from bench.common import machine_info, result_path, write_result  # noqa: E402
 from envs_mjx.render import Camera, Renderer  # noqa: E402
 
 SCENE = """
@@ -258,7 +260,14 @@ def speed(size: int = 48):
     return out
 
 
-def main(n_states: int = 20, sizes=((48, 48), (128, 96))):
+def main(argv=None, sizes=((48, 48), (128, 96))):
+    p = argparse.ArgumentParser(prog="python -m bench render_vs_mujoco", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--states", type=int, default=20, help="random states per camera and size")
+    p.add_argument("--out", default=result_path("render_vs_mujoco"), help="result file")
+    a = p.parse_args(argv)
+    n_states = a.states
+    machine = machine_info()
     m = mujoco.MjModel.from_xml_string(SCENE)
     d = mujoco.MjData(m)
     # label = geom id + 1 so the JAX renderer's labels are geom ids; 0/1/2 labels derived below
@@ -307,12 +316,9 @@ def main(n_states: int = 20, sizes=((48, 48), (128, 96))):
     }
     print(json.dumps(summary, indent=1))
     tasks = task_scenes(n_states)
-    out = {"per_case": results, "summary": summary, "task_scenes": tasks, "speed": speed(),
-           "n_states_per_case": n_states,
-           "mujoco": mujoco.__version__, "jax": jax.__version__}
-    path = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "render_vs_mujoco.json")
-    with open(path, "w") as f:
-        json.dump(out, f, indent=1, default=float)
+    write_result("render_vs_mujoco", {"per_case": results, "summary": summary,
+                                      "task_scenes": tasks, "speed": speed(),
+                                      "n_states_per_case": n_states}, machine, argv, a.out)
 
 
 if __name__ == "__main__":

@@ -3,7 +3,7 @@ of the matmul rate measured in the same process.
 
 1. matmul: a 2048 x 2048 float32 `jnp.dot` (2 * 2048^3 FLOPs), the machine's reference rate;
 2. scene-VAE train step (batch 64, Table 3) and object-VAE train step (batch 128, matching
-   loss on occluded copies), each with the convolutions of roll_jax/conv.py ("matmul", the
+   loss on occluded copies), each with the convolutions of roll_jax/common/conv.py ("matmul", the
    default; "matmul_patches", every transposed conv in the patch form) and with XLA's
    ("lax"), side by side, each batch drawn from a pool as in training;
 3. U-Net train step (the cpu preset's width 8 and the paper preset's 16 at batch 32) with the
@@ -11,7 +11,7 @@ of the matmul rate measured in the same process.
 4. SAC update standalone on a fixed batch: the cpu preset's 128-128 at batch 256, the paper's
    400-300 at batch 1024;
 5. (--chunk) SAC per update inside the cpu-preset ROLL chunk: the same compiled chunk run with
-   the plan's `learn` on and off (`loop.ChunkPlan`, an un-batched switch), plan by plan, the
+   the plan's `learn` on and off (`state.ChunkPlan`, an un-batched switch), plan by plan, the
    difference divided by its updates; HER sampling, prior goals through the LSTM and the
    gathers included. After each on/off pair the standalone update and the other yardsticks
    (`sac_yardstick_timer`) are timed again, and the ratios are the medians over the pairs.
@@ -32,45 +32,29 @@ BatchNorm, Adam and the losses are not counted):
   + backward: P + 2Q + 6Q) and actor (policy forward + backward, twin-Q forward + input
   gradient: 3P + 4Q): 4P + 12Q MACs, P and Q the MLPs' MACs per sample.
 
-    python bench/roofline.py [--chunk [--chunk-rounds 2]] [--quick]
-    python bench/roofline.py --ab ROUNDS   (the VAE steps' forms only, interleaved)
-    python bench/roofline.py --unet-ab ROUNDS   (the U-Net's two kernel-gradient forms)
+    python -m bench roofline [--chunk [--chunk-rounds 2]] [--quick]
 
-Writes bench/results/roofline.json (--ab: bench/results/conv_forms.json, --unet-ab:
-bench/results/unet_wgrad_order.json).
+Writes bench/results/roofline.json.
 """
 from __future__ import annotations
 
 import argparse
 import dataclasses
-import importlib.util
-import json
 import math
-import os
-import statistics
-import sys
-import time
-
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, ROOT)
-
-from bench.common import machine_info, time_best, write_results  # noqa: E402
 
 import jax
 import jax.numpy as jnp
+
+from bench.common import machine_info, result_path, time_best, write_result
 
 from configs.encoders import object_vae_config, scene_vae_config
 from configs.sac import SACConfig
 from configs.segmentation import SegmentationConfig
 from roll_jax.agents import sac
-from roll_jax.common import conv
-from roll_jax.encoders import steps
+from roll_jax.encoders import steps as encoder_steps
 from roll_jax.encoders.models import _CONV, _DECONV, _FEATURE_MAP, IMAGE_SHAPE
 from roll_jax.segmentation import unet
 
-RESULTS = os.path.join(ROOT, "bench", "results", "roofline.json")
-AB_RESULTS = os.path.join(ROOT, "bench", "results", "conv_forms.json")
-UNET_AB_RESULTS = os.path.join(ROOT, "bench", "results", "unet_wgrad_order.json")
 TASK = "puck_push"
 
 
@@ -86,7 +70,7 @@ def _row(name: str, seconds: float, flops: float, peak: float, **extra) -> dict:
 # ----------------------------------------------------------------------------- FLOP counts
 
 def vae_macs(latent_dim: int, feature_dim: int) -> dict:
-    """Multiply-adds per image of the ConvVAE (roll_jax/models.py) by layer group."""
+    """Multiply-adds per image of the ConvVAE (roll_jax/encoders/models.py) by layer group."""
     h, cin, enc = IMAGE_SHAPE[0], IMAGE_SHAPE[2], 0
     for f, k, s in _CONV:
         h = (h - k) // s + 1
@@ -148,11 +132,11 @@ def _vae_images(key, batch: int, object_like: bool):
 
 def vae_step_timer(cfg, steps: int):
     """A function that times `steps` VAE train steps in one jitted `lax.scan` (each batch drawn
-    from a pool of 4 batches, as `steps.vae_fit_epoch` does, so nothing is constant-folded)
+    from a pool of 4 batches, as `encoder_steps.vae_fit_epoch` does, so nothing is constant-folded)
     and returns (first call s, best s per call)."""
     key = jax.random.PRNGKey(0)
     pool, pool_masks = _vae_images(key, 4 * cfg.batch_size, cfg.matching_coef > 0)
-    state = steps.init_vae(key, cfg)
+    state = encoder_steps.init_vae(key, cfg)
 
     @jax.jit
     def run(state, key):
@@ -160,7 +144,7 @@ def vae_step_timer(cfg, steps: int):
             k_idx, k_step = jax.random.split(k)
             idx = jax.random.randint(k_idx, (cfg.batch_size,), 0, pool.shape[0])
             masks = None if pool_masks is None else pool_masks[idx]
-            return steps.vae_train_step(st, k_step, pool[idx], cfg, masks)[0], None
+            return encoder_steps.vae_train_step(st, k_step, pool[idx], cfg, masks)[0], None
         return jax.lax.scan(body, state, jax.random.split(key, steps))[0]
 
     return lambda: time_best(run, state, key)
@@ -229,42 +213,6 @@ def bench_unet(features: int, batch: int, steps: int, peak: float) -> dict:
     return out
 
 
-def _wgrad_input_major(res, g):
-    """`unet.conv_dot_wgrad`'s backward with each tap's kernel gradient as einsum("bhwc,bhwf->cf")
-    (XLA:CPU transposes every tap's input slice), the A/B reference of `unet_wgrad_ab`."""
-    return unet.conv_backward(
-        res, g, lambda g, taps: [jnp.einsum("bhwc,bhwf->cf", x, g) for x in taps])
-
-
-def _wgrad_input_taps(res, g):
-    """`unet.conv_dot_wgrad`'s backward with every kernel gradient from the input's shifted
-    slices (the A/B reference of `unet_wgrad_ab` for the default's thinner-operand taps)."""
-    return unet.conv_backward(res, g, shift_output=False)
-
-
-def unet_wgrad_ab(steps: int, rounds: int) -> dict:
-    """The U-Net train step (widths 8 and 16, batch 32) with the kernel gradient as
-    `conv.weight_gradient` dots over the taps of the thinner operand (the default) against the
-    same dots over the input's taps in every layer, and against x^T g (autodiff's contraction,
-    thinner taps), interleaved in `rounds` rounds in one process."""
-    out = {}
-    for features in (8, 16):
-        timers = {"g_major": unet_step_timer(features, 32, steps, True)[0]}
-        timers["g_major"]()  # traced with the default backward first
-        for name, bwd in (("x_major", _wgrad_input_major), ("input_taps", _wgrad_input_taps)):
-            timers[name] = traced_with_backward(
-                unet.conv_dot_wgrad, unet._conv_fwd, bwd, unet.conv_backward,
-                lambda f=features: unet_step_timer(f, 32, steps, True)[0])
-        out[f"width_{features}"] = res = interleaved(timers, steps, rounds)
-        med = res["median_ms"]
-        res["x_major_over_g_major"] = med["x_major"] / med["g_major"]
-        res["input_taps_over_g_major"] = med["input_taps"] / med["g_major"]
-        print(f"  U-Net width {features}: g^T x over the thinner taps {med['g_major']:.1f} ms, "
-              f"over the input's taps {med['input_taps']:.1f} ms, x^T g {med['x_major']:.1f} ms "
-              f"(median of {rounds} interleaved rounds)", flush=True)
-    return out
-
-
 def bench_sac(hidden, batch: int, steps: int, peak: float, obs=6, goal=6, act=2) -> dict:
     cfg = SACConfig(hidden=tuple(hidden), batch_size=batch)
     key = jax.random.PRNGKey(0)
@@ -292,11 +240,9 @@ def bench_sac(hidden, batch: int, steps: int, peak: float, obs=6, goal=6, act=2)
 def bench_sac_in_chunk(rounds: int) -> dict:
     """Per-update SAC cost inside the cpu-preset ROLL chunk (learn on minus learn off, plan by
     plan), each on/off pair followed by the yardsticks of `sac_yardstick_timer`."""
-    spec = importlib.util.spec_from_file_location("bench_train", os.path.join(ROOT, "bench",
-                                                                              "train.py"))
-    bt = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bt)
-    return bt.sac_share_in_chunk(TASK, "cpu", rounds=rounds,
+    from bench import chunk
+
+    return chunk.sac_share_in_chunk(TASK, "cpu", rounds=rounds,
                                  yardsticks=sac_yardstick_timer(300))
 
 
@@ -309,14 +255,14 @@ TARGET_YARDSTICK = "update on a new batch"
 
 
 def sac_yardstick_timer(steps: int):
-    """A function -> {name: best ms per update} of bench/sac_parts.py's variants at the cpu
+    """A function -> {name: best ms per update} of bench/sac.py's variants at the cpu
     preset's sizes, each compiled once: the standalone update (one constant batch, XLA's
     defaults, as `bench_sac` times it), the same with its metrics kept, the update on a new
     batch per update (`TARGET_YARDSTICK`), one jitted update per call on a batch of its own,
-    and `loop.sac_steps` (HER sampling + update) with XLA's defaults and with the chunk's
+    and `her.sac_steps` (HER sampling + update) with XLA's defaults and with the chunk's
     options."""
-    from bench import sac_parts as sp
-    from roll_jax.training import loop
+    from bench import sac as sp
+    from roll_jax.training.compiler import chunk_compiler_options
 
     v = sp.variants(steps)
     forms = {
@@ -325,9 +271,9 @@ def sac_yardstick_timer(steps: int):
         "update on a constant batch, metrics kept": (v["update, constant batch, metrics kept"],
                                                      None),
         TARGET_YARDSTICK: (v["update, new batch per update, metrics kept"], None),
-        "loop.sac_steps": (v["loop.sac_steps (sampling + update)"], None),
-        "loop.sac_steps, chunk options": (v["loop.sac_steps (sampling + update)"],
-                                          loop.chunk_compiler_options()),
+        "her.sac_steps": (v["her.sac_steps (sampling + update)"], None),
+        "her.sac_steps, chunk options": (v["her.sac_steps (sampling + update)"],
+                                         chunk_compiler_options()),
     }
     compiled = {name: (jax.jit(var.fn, compiler_options=opts).lower(*var.args).compile(), var)
                 for name, (var, opts) in forms.items()}
@@ -342,96 +288,21 @@ def sac_yardstick_timer(steps: int):
     return timer
 
 
-def interleaved(timers: dict, steps: int, rounds: int) -> dict:
-    """ms per step of each timer over `rounds` rounds, the order flipped every other round (this
-    machine's speed drifts by 10-30% over minutes, more than the differences measured), and the
-    medians."""
-    ms = {name: [] for name in timers}
-    for r in range(rounds):
-        for name in (list(timers) if r % 2 == 0 else list(timers)[::-1]):
-            ms[name].append(1e3 * timers[name]()[1] / steps)
-    return {"ms_per_round": ms, "median_ms": {n: statistics.median(v) for n, v in ms.items()}}
-
-
-def traced_with_backward(fn, fwd, bwd, default_bwd, make_timer):
-    """A timer from `make_timer()` traced and compiled while the custom-VJP function `fn` has
-    the backward `bwd` (then `default_bwd` again): a reference form of a kernel gradient."""
-    fn.defvjp(fwd, bwd)
-    try:
-        timer = make_timer()
-        timer()
-    finally:
-        fn.defvjp(fwd, default_bwd)
-    return timer
-
-
-def _patch_matmul_autodiff_bwd(res, g):
-    """autodiff's backward of `conv.patch_matmul`: XLA:CPU contracts P and g over their major
-    axis (the A/B reference of `conv_forms_ab`)."""
-    p, w = res
-    lead = tuple(range(p.ndim - 1))
-    return g @ w.T, jnp.tensordot(p, g, axes=(lead, lead))
-
-
-def conv_forms_ab(steps: int, rounds: int) -> dict:
-    """The VAE train steps as configured ("matmul": its convolutions, the gradient in
-    `grad_parts` slices) against the patch form in every layer ("matmul_patches"), the
-    gradient of the whole batch at once ("matmul_one_part") and the default with autodiff's
-    kernel gradient ("matmul_autodiff_wgrad"), interleaved in `rounds` rounds in one
-    process."""
-    out = {}
-    for name, cfg in (("scene_vae", scene_vae_config(TASK)), ("object_vae", object_vae_config(TASK))):
-        timers = {impl: vae_step_timer(dataclasses.replace(cfg, conv_impl=impl), steps)
-                  for impl in ("matmul", "matmul_patches")}
-        timers["matmul_one_part"] = vae_step_timer(dataclasses.replace(cfg, grad_parts=1), steps)
-        for timer in timers.values():  # traced with the default backward first
-            timer()
-        timers["matmul_autodiff_wgrad"] = traced_with_backward(
-            conv.patch_matmul, conv._patch_matmul_fwd, _patch_matmul_autodiff_bwd,
-            conv._patch_matmul_bwd, lambda cfg=cfg: vae_step_timer(cfg, steps))
-        out[name] = interleaved(timers, steps, rounds)
-        med = out[name]["median_ms"]
-        out[name].update({f"{impl}_over_matmul": med[impl] / med["matmul"]
-                          for impl in ("matmul_patches", "matmul_one_part",
-                                       "matmul_autodiff_wgrad")})
-        print(f"  {name}: " + ", ".join(f"{impl} {v:.2f} ms" for impl, v in med.items())
-              + f" (median of {rounds} interleaved rounds)", flush=True)
-    return out
-
-
 def main(argv=None):
-    p = argparse.ArgumentParser(description=__doc__,
+    p = argparse.ArgumentParser(prog="python -m bench roofline", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--chunk", action="store_true",
                    help="also time SAC inside the cpu-preset chunk (compiles the chunk: minutes)")
     p.add_argument("--chunk-rounds", type=int, default=2, metavar="N",
                    help="--chunk: refresh cycles of 4 plans, each plan with SAC on and off")
     p.add_argument("--quick", action="store_true", help="fewer steps per call")
-    p.add_argument("--ab", type=int, metavar="ROUNDS", default=0,
-                   help="only the VAE steps' forms (`conv_forms_ab`), interleaved in ROUNDS rounds "
-                        "(writes bench/results/conv_forms.json)")
-    p.add_argument("--unet-ab", type=int, metavar="ROUNDS", default=0,
-                   help="only the U-Net train step's kernel-gradient forms, "
-                        "interleaved in ROUNDS rounds (writes bench/results/unet_wgrad_order.json)")
-    p.add_argument("--out", default=None)
+    p.add_argument("--out", default=result_path("roofline"), help="result file")
     a = p.parse_args(argv)
+    machine = machine_info()
     if a.chunk_rounds < 1:
         p.error(f"--chunk-rounds must be >= 1, got {a.chunk_rounds}")
     steps = 5 if a.quick else 20
-    if a.unet_ab:
-        res = {**machine_info(),
-               "note": unet_wgrad_ab.__doc__.split("\n\n")[0], "rounds": a.unet_ab,
-               "steps": max(steps // 4, 3)}
-        res.update(unet_wgrad_ab(max(steps // 4, 3), a.unet_ab))
-        write_results(a.out or UNET_AB_RESULTS, res)
-        return
-    if a.ab:
-        res = {**machine_info(), "task_configs": TASK,
-               "note": conv_forms_ab.__doc__.split("\n\n")[0], "rounds": a.ab, "steps": steps}
-        res.update(conv_forms_ab(steps, a.ab))
-        write_results(a.out or AB_RESULTS, res)
-        return
-    res = {**machine_info(), "task_configs": TASK, "note": __doc__.split("\n\n")[0]}
+    res = {"task_configs": TASK, "note": __doc__.split("\n\n")[0]}
     print("matmul reference", flush=True)
     res["matmul"] = bench_matmul()
     peak = res["matmul"]["gflop_per_s"]
@@ -444,8 +315,8 @@ def main(argv=None):
                   bench_sac((400, 300), 1024, steps, peak)]
     if a.chunk:
         # The standalone update trains on one constant batch, so XLA folds part of its work;
-        # the same update on a new batch per update, and `loop.sac_steps` (HER sampling
-        # included) outside the chunk, are the fairer yardsticks (bench/sac_parts.py). Each
+        # the same update on a new batch per update, and `her.sac_steps` (HER sampling
+        # included) outside the chunk, are the fairer yardsticks (bench/sac.py). Each
         # is timed after every on/off pair of chunks: their ratios are taken pair by pair.
         print(f"SAC inside the cpu-preset chunk, {a.chunk_rounds} refresh cycle(s)", flush=True)
         res["sac_in_chunk"] = bench_sac_in_chunk(a.chunk_rounds)
@@ -457,7 +328,7 @@ def main(argv=None):
               f"{over[TARGET_YARDSTICK]:.2f}x the {TARGET_YARDSTICK} (target <= 1.3x), "
               f"{over['standalone update']:.2f}x the constant-batch update without metrics",
               flush=True)
-    write_results(a.out or RESULTS, res)
+    write_result("roofline", res, machine, argv, a.out)
 
 
 if __name__ == "__main__":

@@ -1,16 +1,16 @@
 """Where a SAC update's time goes at the cpu preset: the update alone (as bench/roofline.py
-times it, and with what it drops put back), HER sampling alone, and `loop.sac_steps` (sampling
+times it, and with what it drops put back), HER sampling alone, and `her.sac_steps` (sampling
 + update, as the chunk runs it).
 
 Sizes: the cpu preset's SAC (128-128, batch 256), 6-d latents, 2-d actions, a filled buffer of
-1000 episodes x 51 frames of random latents, ROLL's prior-goal bank (`loop.PRIOR_BANK`).
+1000 episodes x 51 frames of random latents, ROLL's prior-goal bank (`goal_encoding.PRIOR_BANK`).
 Each variant runs --steps updates in one jitted `lax.scan`; the best call after a warm-up
 (`bench.common.time_best`: at least 3 calls, more until 1 s was timed). "interleaved" runs
-`loop.sac_steps` as the chunk's "step" schedule does: `updates_per_step x n_envs` updates
+`her.sac_steps` as the chunk's "step" schedule does: `updates_per_step x n_envs` updates
 under a `lax.cond` inside each step of a scan over env steps, with a 512 x 512 matmul per
-step standing in for the env's work (timed with the cond on minus off, as bench/train.py
+step standing in for the env's work (timed with the cond on minus off, as bench/chunk.py
 times the chunk). Every variant is compiled twice, with XLA's defaults and
-with the chunk's own compiler options (`loop.chunk_compiler_options`), and timed both ways.
+with the chunk's own compiler options (`compiler.chunk_compiler_options`), and timed both ways.
 The last row is no scan: `--steps` calls of a jitted `sac.sac_update`, one per update, each on
 a batch of its own (best of 3 such loops).
 
@@ -19,30 +19,24 @@ yardstick), XLA deletes the metrics' work and hoists what depends on the batch a
 the loop: its loop body holds 184 fusions against 251 for the update on a new batch with its
 metrics, which is the update the chunk runs (docs/training.md).
 
-    python bench/sac_parts.py [--steps 300] [--out bench/results/sac_parts.json]
+    python -m bench sac [--steps 300]
 """
 from __future__ import annotations
 
 import argparse
 import collections
-import os
 import re
-import sys
 import time
 from typing import Any, Callable, NamedTuple
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+import jax
+import jax.numpy as jnp
 
-import jax  # noqa: E402
-import jax.numpy as jnp  # noqa: E402
-
-from bench.common import cpu_model, time_best, write_results  # noqa: E402
-from configs.train import make_config  # noqa: E402
-from roll_jax.agents import replay, sac
-from roll_jax.training import loop  # noqa: E402
-from roll_jax.encoders.goal_encoding import goal_encoder  # noqa: E402
-
-RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "sac_parts.json")
+from bench.common import machine_info, result_path, time_best, write_result
+from configs.train import make_config
+from roll_jax.agents import her, replay, sac
+from roll_jax.encoders.goal_encoding import PRIOR_BANK, goal_encoder
+from roll_jax.training.compiler import chunk_compiler_options
 
 
 class Variant(NamedTuple):
@@ -68,7 +62,7 @@ def _setup():
                       rollout_goals=jax.random.normal(ks[2], buf.rollout_goals.shape),
                       actions=jax.random.uniform(ks[3], buf.actions.shape, minval=-1, maxval=1),
                       size=jnp.int32(n))
-    bank = jax.random.normal(ks[4], (loop.PRIOR_BANK, d))
+    bank = jax.random.normal(ks[4], (PRIOR_BANK, d))
     fixed = replay.sample_transitions(buf, ks[5], b, bank[:b], scfg.goal_fracs, cfg.reward_norm)
     return cfg, state, buf, bank, fixed, jax.random.normal(ks[6], (512, 512))
 
@@ -79,6 +73,7 @@ def variants(steps: int) -> dict[str, Variant]:
     cfg, state, buf, bank, fixed, work = _setup()
     scfg, enc = cfg.sac, goal_encoder(cfg)
     b = scfg.batch_size
+    source = her.FreshGoals(bank=bank)
 
     def constant_batch(s, k):
         return jax.lax.scan(lambda s, k: (sac.sac_update(s, k, fixed, scfg)[0], None), s,
@@ -99,26 +94,26 @@ def variants(steps: int) -> dict[str, Variant]:
     def her_only(k):
         def body(c, k):
             k1, k2 = jax.random.split(k)
-            fresh = loop.fresh_goals(enc, buf, None, k1, b, bank)
+            fresh = her.fresh_goals(enc, buf, source, k1, b)
             x = replay.sample_transitions(buf, k2, b, fresh, scfg.goal_fracs, cfg.reward_norm)
             return c + sum(jnp.sum(v) for v in jax.tree.leaves(x)), None
         return jax.lax.scan(body, 0.0, jax.random.split(k, steps))[0]
 
     def sac_steps(s, k):
-        return loop.sac_steps(cfg, enc, s, buf, None, k, steps, bank)
+        return her.sac_steps(cfg, enc, s, buf, source, k, steps)
 
     per_step = cfg.n_envs * scfg.updates_per_step
     env_steps = -(-steps // per_step)  # whole env steps of per_step updates each
 
     def interleaved(s, k, learn):
         zeros = jax.tree.map(jnp.zeros_like, jax.eval_shape(
-            lambda q: loop.sac_steps(cfg, enc, q, buf, None, k, per_step, bank)[1], s))
+            lambda q: her.sac_steps(cfg, enc, q, buf, source, k, per_step)[1], s))
 
         def step(c, k):
             s, x = c
             x = jnp.tanh(x @ work)
             s, m = jax.lax.cond(
-                learn, lambda q: loop.sac_steps(cfg, enc, q, buf, None, k, per_step, bank),
+                learn, lambda q: her.sac_steps(cfg, enc, q, buf, source, k, per_step),
                 lambda q: (q, zeros), s)
             return (s, x), m
         return jax.lax.scan(step, (s, work), jax.random.split(k, env_steps))
@@ -130,8 +125,8 @@ def variants(steps: int) -> dict[str, Variant]:
         "update, constant batch, metrics kept": Variant(constant_batch_metrics, (state, key), steps),
         "update, new batch per update, metrics kept": Variant(new_batch_metrics, (state, key), steps),
         "HER sampling and relabeling alone": Variant(her_only, (key,), steps),
-        "loop.sac_steps (sampling + update)": Variant(sac_steps, (state, key), steps),
-        "interleaved: loop.sac_steps inside env steps": Variant(
+        "her.sac_steps (sampling + update)": Variant(sac_steps, (state, key), steps),
+        "interleaved: her.sac_steps inside env steps": Variant(
             interleaved, (state, key, jnp.bool_(True)), env_steps * per_step,
             off_args=(state, key, jnp.bool_(False))),
     }
@@ -199,14 +194,15 @@ def ms_per_update(v: Variant, f) -> float:
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(description=__doc__,
+    p = argparse.ArgumentParser(prog="python -m bench sac", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--steps", type=int, default=300)
-    p.add_argument("--out", default=RESULTS)
+    p.add_argument("--steps", type=int, default=300, help="updates per timed call")
+    p.add_argument("--out", default=result_path("sac"), help="result file")
     a = p.parse_args(argv)
     if a.steps <= 0:
         p.error(f"--steps must be positive, got {a.steps}")
-    options = loop.chunk_compiler_options()
+    machine = machine_info()
+    options = chunk_compiler_options()
     # The chunk's options are left out off a CPU backend or where this jaxlib refuses them.
     settings = [("xla_defaults", None)]
     if options is not None:
@@ -230,9 +226,8 @@ def main(argv=None):
         print(f"{row['name']:50s} " + "  ".join(f"{k[14:]} {v:6.3f} ms" for k, v in row.items()
                                                 if k.startswith("ms_")),
               row.get("loop_body_ops_xla_defaults", ""), flush=True)
-    write_results(a.out, {"steps": a.steps, "jax_version": jax.__version__,
-                          "cpu_count": os.cpu_count(), "cpu_model": cpu_model(),
-                          "chunk_compiler_options": options, "rows": rows})
+    write_result("sac", {"steps": a.steps, "chunk_compiler_options": options, "rows": rows},
+                 machine, argv, a.out)
 
 
 if __name__ == "__main__":

@@ -5,33 +5,27 @@ lr 0 AND NOT U-Net robot) in images/s at batch 1, 64, 1024, U-Net width from the
 Writes bench/results/segmentation.json, keys "mog2" (frames/s at batch 1, 64, 1024 of
 independent 48x48x3 models, ratio against cv2 measured in the same run) and "mog2_parity"
 (per-frame mask agreement with cv2 over 2000+ frame synthetic videos) and "mog2_parity_scenes"
-(--part scenes: the same on every scene's rendered frames, as the pipeline uses them). Other
-keys in the file are kept.
+(--part scenes: the same on every scene's rendered frames, as the pipeline uses them). A run
+of one part keeps the other parts' figures of an earlier run on the same device.
 
-    python bench/segmentation.py [--quick]
+    python -m bench segmentation [--quick] [--part mog2|segment|scenes]
 """
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import platform
-import sys
 import time
-
-import numpy as np
-
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import cv2
 import jax
+import numpy as np
 
+from bench.common import machine_info, read_figures, result_path, write_result
 from roll_jax.segmentation import mog2
 from roll_jax.segmentation import mog2_parity as mp
 
 H = W = 48
 C = 3
-RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "segmentation.json")
 
 
 def _env_frames(video: np.ndarray, b: int, steps: int, start: int) -> np.ndarray:
@@ -44,10 +38,7 @@ def _env_frames(video: np.ndarray, b: int, steps: int, start: int) -> np.ndarray
 def bench_mog2(batches=(1, 64, 1024), warmup=30) -> dict:
     video = mp.synthetic_video("mixed", t=300, h=H, w=W, c=C, seed=0)
     out = {"frame_shape": [H, W, C], "history": 500, "learning_rate": -1.0,
-           "jax_backend": jax.default_backend(), "jax_device": str(jax.devices()[0]),
-           "cpu": platform.processor() or platform.machine(), "cpu_count": os.cpu_count(),
-           "cv2_threads": cv2.getNumThreads(), "cv2_version": cv2.__version__,
-           "jax_version": jax.__version__, "load_average_at_start": os.getloadavg()[0],
+           "cv2_threads": cv2.getNumThreads(), "load_average_at_start": os.getloadavg()[0],
            "note": "frames/s = model-frames per second; batch = independent models (one per "
                    "env) stepped together by apply_batch; cv2 = a Python loop over as many "
                    "cv2 subtractors; both on this machine's CPU in the same run",
@@ -218,15 +209,16 @@ def bench_segment(batches=(1, 64, 1024)) -> dict:
     return out
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(prog="python -m bench segmentation", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="small batches and short videos")
-    ap.add_argument("--part", choices=("all", "mog2", "segment", "scenes"), default="all")
-    args = ap.parse_args()
-    results = {}
-    if os.path.exists(RESULTS):
-        with open(RESULTS) as f:
-            results = json.load(f)
+    ap.add_argument("--part", choices=("all", "mog2", "segment", "scenes"), default="all",
+                    help="what to measure (default all)")
+    ap.add_argument("--out", default=result_path("segmentation"), help="result file")
+    args = ap.parse_args(argv)
+    machine = machine_info()
+    results = read_figures(args.out, machine)
     if args.part in ("all", "segment"):
         results["segment"] = bench_segment((1, 64) if args.quick else (1, 64, 1024))
     if args.part in ("all", "scenes"):
@@ -240,13 +232,10 @@ def main() -> None:
     else:
         results["mog2"] = bench_mog2()
         results["mog2_parity"] = parity_mog2()
-    os.makedirs(os.path.dirname(RESULTS), exist_ok=True)
-    with open(RESULTS, "w") as f:
-        json.dump(results, f, indent=2)
     p = results.get("mog2_parity", {"runs": [], "min": float("nan"), "mean": float("nan")})
     print(f"mog2 parity over {len(p['runs'])} videos: min per-frame agreement {p['min']:.6f}, "
           f"mean {p['mean']:.6f}")
-    print("wrote", RESULTS)
+    write_result("segmentation", results, machine, argv, args.out)
 
 
 if __name__ == "__main__":

@@ -41,7 +41,7 @@ jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
 # so the short files come last and even out the two workers' finishing times.
 _SLOW_FIRST = ("test_train.py", "test_sharding.py", "test_segmentation_pipeline.py",
                "test_envs.py", "test_oracle.py", "test_losses.py", "test_skewfit_ablations.py",
-               "test_analysis.py", "test_envs_render.py")
+               "test_analysis.py", "test_gpu_check.py", "test_envs_render.py")
 
 
 def pytest_collection_modifyitems(config, items):

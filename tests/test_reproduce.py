@@ -8,7 +8,8 @@ import os
 import numpy as np
 import pytest
 
-from roll_jax.training import driver, reproduce, run_dir
+from configs.train import build_config
+from roll_jax.training import reproduce, run_dir
 
 
 class FakeRun:
@@ -276,3 +277,42 @@ def test_schedule_starts_the_fitter_that_releases_most_cells_first(tmp_path):
     assert released == {"hurdle_top__roll": ["hurdle_top__roll_no_lstm",
                                              "hurdle_top__roll_no_matching_loss"],
                         "puck_push__roll": []}
+
+
+# ----------------------------------------------------------------------------- timings
+
+def _fake_grid(base):
+    """Two runs' timings.json as driver.run writes them (phase lists, totals)."""
+    for name, chunks in (("a__roll", [10.5, 1.25]), ("b__skewfit", [8.0, 1.25])):
+        d = base / "runs" / name
+        d.mkdir(parents=True)
+        wall = {"segmentation": [3.0], "pretrain": [4.1], "init": [1.0], "chunks": chunks,
+                "final_eval": [0.5]}
+        (d / "timings.json").write_text(json.dumps({
+            "wall_s": wall, "cpu_s": wall, "total_wall_s": 20.0, "total_cpu_s": 19.5}))
+
+
+def test_run_timings_sum_each_runs_phases(tmp_path):
+    _fake_grid(tmp_path)
+    runs = reproduce.run_timings(str(tmp_path))
+    assert [r["run"] for r in runs] == ["a__roll", "b__skewfit"]
+    assert runs[0]["chunks_wall_s"] == 11.75 and runs[0]["first_chunk_wall_s"] == 10.5
+    total = reproduce.timings_summary(runs)
+    assert total["runs"] == 2 and total["sum_run_wall_s"] == 40.0
+    assert total["first_chunk_wall_s"] == 18.5 and total["phase_wall_s"]["chunks"] == 21.0
+    (tmp_path / "runs" / "c__oracle").mkdir()
+    with pytest.raises(FileNotFoundError, match="no timings.json"):
+        reproduce.run_timings(str(tmp_path))
+
+
+def test_committed_grid_benchmark_sums_its_runs():
+    """bench/results/grid.json (python -m bench grid) holds the sums of its per-run rows."""
+    path = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "bench",
+                        "results", "grid.json")
+    with open(path) as f:
+        res = json.load(f)
+    assert res["benchmark"] == "grid" and {"machine", "versions", "date"} <= set(res)
+    fig = res["figures"]
+    again = reproduce.timings_summary(fig["per_run"])
+    assert {k: fig[k] for k in again} == again
+    assert fig["wall_min"] == pytest.approx(fig["wall_s"] / 60, abs=0.005)

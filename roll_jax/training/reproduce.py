@@ -1,12 +1,12 @@
 """The paper's experiment grid: tasks x algorithms (x seeds, in one run each), ablations,
 Figure 4, the ablation figure and a results table.
 
-    python -m roll_jax.training.reproduce --preset paper --out runs/paper
-    python -m roll_jax.training.reproduce --preset smoke --out runs/smoke --tasks puck_push --seeds 2
-    python -m roll_jax.training.reproduce ... --ablations            # + ROLL ablations on hurdle_top
-    python -m roll_jax.training.reproduce ... --report-only          # redraw from the runs on disk
-    python -m roll_jax.training.reproduce ... --jobs 2               # 2 cells at once (CPU)
-    python -m roll_jax.training.reproduce ... --algos roll skewfit oracle   # + the state oracle's cells
+    roll-reproduce --preset paper --out runs/paper
+    roll-reproduce --preset smoke --out runs/smoke --tasks puck_push --seeds 2
+    roll-reproduce ... --ablations            # + ROLL ablations on hurdle_top
+    roll-reproduce ... --report-only          # redraw from the runs on disk
+    roll-reproduce ... --jobs 2               # 2 cells at once (CPU)
+    roll-reproduce ... --algos roll skewfit oracle   # + the state oracle's cells
 
 Each cell is one `roll_jax.training.driver.run` in DIR/runs/TASK__VARIANT (all its seeds in one
 program: vmapped on a GPU, one after the other on a CPU, `--seed-batch`; sharded over
@@ -17,8 +17,8 @@ fitted once per task (DIR/segmentation/TASK, shared by the task's ROLL runs: sam
 config, so the same fit); pre-training datasets and models are shared the same way
 (DIR/pretrain, keyed by what they were built from). Then DIR/figure4.png, DIR/ablations.png
 (with --ablations), DIR/results.md and DIR/results.csv are drawn from the runs' metrics.csv
-files. (`roll-reproduce` is the same command once the package is installed; --preset
-defaults to cpu.)
+files. (`python -m roll_jax.training.reproduce` is the same command without installing the
+package; --preset defaults to cpu.)
 """
 
 from __future__ import annotations
@@ -316,6 +316,40 @@ def run_grid(cells: list[Cell], a, run_fn=None, pool=None) -> dict[str, str]:
 
 
 # ----------------------------------------------------------------------------- report
+
+PHASES = ("segmentation", "pretrain", "init", "chunks", "final_eval")  # of a run's timings.json
+
+
+def run_timings(out: str) -> list[dict]:
+    """Per run of the grid in `out`: its total and per-phase wall and CPU seconds (its
+    timings.json), the first chunk apart (it includes the chunk's compile)."""
+    runs = []
+    base = os.path.join(out, "runs")
+    for name in sorted(os.listdir(base)):
+        path = os.path.join(base, name, "timings.json")
+        if not os.path.exists(path):
+            raise FileNotFoundError(f"{path}: the run has no timings.json (unfinished?)")
+        with open(path) as f:
+            t = json.load(f)
+        wall, cpu = t["wall_s"], t["cpu_s"]
+        row = {"run": name, "total_wall_s": t["total_wall_s"], "total_cpu_s": t["total_cpu_s"]}
+        for k in PHASES:
+            row[f"{k}_wall_s"] = round(sum(wall.get(k, [])), 2)
+            row[f"{k}_cpu_s"] = round(sum(cpu.get(k, [])), 2)
+        row["first_chunk_wall_s"] = wall["chunks"][0]
+        runs.append(row)
+    return runs
+
+
+def timings_summary(runs: list[dict]) -> dict:
+    """The sums over `run_timings` rows: runs, their wall and CPU seconds, the first chunks'
+    wall seconds, wall seconds per phase."""
+    return {"runs": len(runs),
+            "sum_run_wall_s": round(sum(r["total_wall_s"] for r in runs), 1),
+            "sum_run_cpu_s": round(sum(r["total_cpu_s"] for r in runs), 1),
+            "first_chunk_wall_s": round(sum(r["first_chunk_wall_s"] for r in runs), 1),
+            "phase_wall_s": {k: round(sum(r[f"{k}_wall_s"] for r in runs), 1) for k in PHASES}}
+
 
 def read_metrics(path: str) -> list[dict]:
     return read_rows(path, 2**62)  # every row

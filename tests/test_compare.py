@@ -1,0 +1,43 @@
+"""roll-analysis compare: the paired figures of two runs' metrics rows and of two runs' final
+policies on shared goals."""
+
+import numpy as np
+import pytest
+
+from roll_jax.analysis import compare
+
+
+def _rows(dist):  # dist[eval][seed]
+    return [{"env_steps": 1000 * i, "seed": s, "final_distance": d}
+            for i, per_seed in enumerate(dist) for s, d in enumerate(per_seed)]
+
+
+def test_compare_pairs_evaluations_and_counts_wins():
+    goals = np.array([[0.10, 0.08], [0.12, 0.06], [0.05, 0.09], [0.11, 0.07]])  # shared jitter
+    a, b = goals - 0.01, goals + 0.01
+    a[3, 0] += 0.05  # one evaluation where A is worse
+    out = compare.compare(_rows(a.tolist()), _rows(b.tolist()), from_steps=1000)
+    assert out["n_evaluations"] == 3 and out["evaluations_a_below_b"] == 2
+    np.testing.assert_allclose(out["paired_diff_mean"], (-0.02 * 6 + 0.05) / 6, atol=1e-12)
+    assert out["corr_per_seed_eval"] > 0.5  # the goals' jitter shows in both runs
+    np.testing.assert_allclose(out["median_a"][0], np.median(a[0]))
+
+
+def test_compare_refuses_runs_that_do_not_pair():
+    with pytest.raises(ValueError, match="do not share evaluation steps and seeds"):
+        compare.compare(_rows([[0.1, 0.1]]), _rows([[0.1, 0.1], [0.1, 0.1]]))
+    short = compare.compare(_rows([[0.1], [0.2], [0.3]]), _rows([[0.2], [0.1]]), to_steps=1000)
+    assert short["env_steps"] == [0, 1000] and short["evaluations_a_below_b"] == 1
+    with pytest.raises(ValueError, match="--from-steps 5000 is past the last evaluation 0"):
+        compare.compare(_rows([[0.1]]), _rows([[0.2]]), from_steps=5000)
+
+
+def test_final_policy_difference_is_per_episode():
+    b = np.array([[4.0, 8.0, 2.0], [6.0, 3.0, 9.0]])  # [seeds, goals] cm
+    a = b - np.array([[1.0, 2.0, -1.0], [1.0, 1.0, 1.0]])
+    out = compare.difference(a, b)
+    d = np.array([-1.0, -2.0, 1.0, -1.0, -1.0, -1.0])
+    assert out["n"] == 6 and out["share_a_closer"] == pytest.approx(5 / 6)
+    assert out["mean_a_minus_b_cm"] == pytest.approx(d.mean())
+    assert out["standard_error_cm"] == pytest.approx(d.std(ddof=1) / np.sqrt(6))
+    assert out["median_a_minus_b_cm"] == pytest.approx(-1.0)
