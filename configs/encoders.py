@@ -46,10 +46,10 @@ def _check_positive(obj, names) -> None:
 
 
 CONV_IMPLS = ("matmul", "matmul_patches", "lax")
-DECODERS = ("deconv", "broadcast")  # roll_jax.models.DECODERS
+DECODERS = ("deconv", "broadcast")  # roll_jax.encoders.models.DECODERS
 
 
-# The VAE matching loss's occlusions (roll_jax.losses.OCCLUSIONS implements each).
+# The VAE matching loss's occlusions (roll_jax.encoders.losses.OCCLUSIONS implements each).
 OCCLUSION_SHAPES = ("pixels", "edge")
 
 
@@ -117,7 +117,7 @@ class VAEConfig:
     # objective by keeping this; None = batch_size.
     kl_reference_batch: int | None = None
     # Not in the paper: how the convolutions are computed, "matmul" (one matmul per layer,
-    # roll_jax/conv.py: the fast path on XLA:CPU; the first transposed conv as col2im),
+    # roll_jax/common/conv.py: the fast path on XLA:CPU; the first transposed conv as col2im),
     # "matmul_patches" (the patch form in every layer, for comparison) or "lax" (XLA's
     # convolutions). The parameters and values are the same (float32 roundoff).
     conv_impl: str = "matmul"
@@ -129,7 +129,7 @@ class VAEConfig:
     grad_parts: int | None = None
     # Not in the paper: "deconv" is Table 3's decoder (dense -> 3x3x64 -> three transposed
     # convs); "broadcast" tiles the latent over a grid with coordinate channels (a spatial
-    # broadcast decoder, roll_jax/models.py) before Table 3's last transposed conv.
+    # broadcast decoder, roll_jax/encoders/models.py) before Table 3's last transposed conv.
     decoder: str = "deconv"
 
     def __post_init__(self):
