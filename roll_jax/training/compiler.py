@@ -73,7 +73,7 @@ def accepted_options(options: tuple[tuple[str, object], ...]) -> dict | None:
 # XLA:CPU options for the chunk alone: the older elemental emitters and LLVM at -O1 compile
 # the cpu preset's chunk faster and it runs faster; without the YNNPACK fusions its SAC
 # updates run faster and its online LSTM steps slower, the chunk faster in all
-# (docs/training.md#compiling). The other programs keep XLA's defaults (the VAE and U-Net
+# (docs/training.md#compiling-the-chunk). The other programs keep XLA's defaults (the VAE and U-Net
 # train steps run slower with the emitters and without YNNPACK).
 CHUNK_CPU_COMPILER_OPTIONS = (("xla_cpu_use_fusion_emitters", False),
                               ("xla_backend_optimization_level", 1),

@@ -133,7 +133,7 @@ def compile_chunk(cfg: TrainConfig, env, n_devices: int = 1, seed_batch: int | N
     a second run of the same config, e.g. a resumed run or a grid cell, calls the programs
     this one traced and compiled. Retracing would not reliably find them in the persistent
     cache: JAX's bounded trace caches make the lowered module depend on what the process
-    traced before (docs/training.md)."""
+    traced before (docs/training.md, "Compiling the chunk")."""
     return _compiled_chunk(cfg, env, int(n_devices), seed_batch, bool(evaluate))
 
 

@@ -76,7 +76,7 @@ REFRESH_CHUNK = 64  # episodes encoded at a time when the buffer's latents are r
 # about this many episodes per block of the goal-latent refresh (latents in, no images;
 # `replay.recompute` rounds it to divide the buffer: a full 50k buffer's 1000 episodes go in
 # blocks of 125): an LSTM step costs about the same at 64 and at 125 sequences on a CPU, so
-# that refresh takes 223 ms against 413 ms in blocks of 64 (docs/training.md)
+# that refresh takes 223 ms against 413 ms in blocks of 64 (docs/training.md, "Cached latents")
 GOAL_REFRESH_CHUNK = 128
 # episodes per block of the buffer's log p(x): 4 x 51 frames x skew_num_latents decodes
 LOG_P_CHUNK = 4
