@@ -250,7 +250,8 @@ def bench_sac_in_chunk(rounds: int) -> dict:
 # new batch each update), without the HER sampling the chunk adds. "standalone update" (one
 # constant batch, metrics dropped) is the FLOP-rate yardstick of `bench_sac`: in its loop XLA
 # deletes the metrics' work and hoists the batch-only work (184 against 251 fusions per
-# update), so it times less than the update (docs/training.md).
+# update), so it times less than the update (bench/sac.py; the target: docs/training.md,
+# "What a chunk costs").
 TARGET_YARDSTICK = "update on a new batch"
 
 

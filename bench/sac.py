@@ -17,7 +17,7 @@ a batch of its own (best of 3 such loops).
 In a scan on one constant batch with its metrics dropped (the roofline's FLOP-rate
 yardstick), XLA deletes the metrics' work and hoists what depends on the batch alone out of
 the loop: its loop body holds 184 fusions against 251 for the update on a new batch with its
-metrics, which is the update the chunk runs (docs/training.md).
+metrics, which is the update the chunk runs (docs/training.md, "What a chunk costs").
 
     python -m bench sac [--steps 300]
 """

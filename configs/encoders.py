@@ -91,7 +91,8 @@ class VAEConfig:
     # Not in the paper: a second matching loss, between the codes of two renderings of one
     # pre-training object state with the hand at two random places in its box (the arm hides
     # the object as it does, where `occlusion_shape` drops pixels), times this coefficient;
-    # 0 leaves it out. docs/analysis.md, "Seeing through the arm".
+    # 0 leaves it out. Measured and not adopted: docs/encoders.md, "The cpu preset's encoder
+    # settings".
     arm_pair_coef: float = 0.0
     image_size: int = 48  # "Implementation details": 48 x 48 images
     # Not in the paper. Reference code: logvar = log(1e-3) + |dense|, a variance floor.
@@ -110,7 +111,8 @@ class VAEConfig:
     # rlkit/torch/vae/conv_vae.py; PyTorch issues #43228, #11149), while its KL is a batch MEAN
     # (ROLL/LSTM_model.py ~l.222). Divided by the batch size B, the objective the published
     # betas were tuned on is SSE(x) + (beta / B) KL(x) per image: True applies that (the
-    # default), False applies beta per image (which collapses the object-VAE: docs/analysis.md).
+    # default), False applies beta per image (which collapses the object-VAE: docs/encoders.md,
+    # "Losses").
     kl_per_batch_sum: bool = True
     # B of that division: the batch the published beta was tuned with (Table 3: scene 64,
     # object 128). A preset that trains on smaller batches for speed keeps the paper's
@@ -124,7 +126,7 @@ class VAEConfig:
     # Not in the paper: a train step's gradient is the mean of the gradients of this many equal
     # slices of its batch (loss and metrics are batch means: the same values within float32
     # roundoff). XLA:CPU runs the slices' independent ops side by side on its threads; measured
-    # in docs/training.md ("Convolutions on the CPU"). None (auto): 2 on a CPU backend where the
+    # in docs/encoders.md ("Speed on the CPU"). None (auto): 2 on a CPU backend where the
     # batch splits evenly, else 1 (the whole batch at once; accelerators gain nothing from it).
     grad_parts: int | None = None
     # Not in the paper: "deconv" is Table 3's decoder (dense -> 3x3x64 -> three transposed

@@ -7,8 +7,8 @@ os.environ.setdefault("MUJOCO_GL", "disable")
 from roll_jax.training import compiler  # noqa: E402  (no jax import at module level)
 
 # XLA:CPU options that cut the suite's compiles without slowing what it runs: the older
-# elemental emitters, and LLVM at -O1 instead of -O2 (bench/compile_flags.py; the figures in
-# docs/training.md). Set before jax starts, and only where this jaxlib knows them: XLA
+# elemental emitters, and LLVM at -O1 instead of -O2 (the figures in docs/development.md,
+# "The test suite"). Set before jax starts, and only where this jaxlib knows them: XLA
 # aborts on an unknown flag.
 FAST_COMPILE_FLAGS = ("--xla_cpu_use_fusion_emitters=false", "--xla_backend_optimization_level=1")
 

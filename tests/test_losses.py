@@ -31,7 +31,8 @@ FIT = jax.jit(steps.vae_fit_epoch, static_argnames="cfg")
 def vae():
     # The paper's beta 20 under the reference scaling (20 / 128 per image), on batches of 8,
     # with the cpu preset's VAE matching coefficient (the paper's 400 first shrinks the
-    # latents: docs/analysis.md).
+    # latents; the scaling and the coefficient: docs/encoders.md, "Losses" and "The cpu preset's
+    # encoder settings").
     cfg = object_vae_config("puck_push", batch_size=8, batches_per_epoch=25, matching_coef=4.0)
     return cfg, steps.init_vae(jax.random.key(0), cfg)
 

@@ -3,7 +3,8 @@
 Whole episodes are stored at fixed shapes [n_traj, T(+1), ...] in a ring of trajectories, so
 that (a) the LSTM can be trained on and re-run over whole trajectories, (b) the cached latents
 of every stored image can be recomputed after the scene-VAE / LSTM change (`recompute`),
-and (c) 'future' goals come from later steps of the same episode. Why not flashbax: docs/replay.md.
+and (c) 'future' goals come from later steps of the same episode. Why not flashbax:
+docs/training.md ("Replay buffer and HER").
 
 Every function is pure and jittable (donate the buffer when jitting `add_trajectories` and
 `recompute`: the image arrays are the big part of the train state).

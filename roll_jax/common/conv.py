@@ -9,7 +9,7 @@ matmul rate. The kernel gradient is computed as ``g^T P`` with the transposed ou
 ``g^T`` materialised (`weight_gradient`): left to itself, XLA:CPU contracts ``P`` and ``g``
 over their major axis, a form its YNNPACK dots do not take (that form adds 14-17% to the
 object-VAE train step, 27-50% to the U-Net's). Measured figures: bench/roofline.py,
-docs/training.md.
+docs/encoders.md ("Speed on the CPU").
 
 ``Conv`` / ``ConvTranspose`` are drop-in replacements for flax's ``nn.Conv`` /
 ``nn.ConvTranspose`` with ``padding="VALID"``: the same parameter names, shapes
@@ -119,7 +119,8 @@ def conv_transpose_col2im(x: jnp.ndarray, kernel: jnp.ndarray, stride: int) -> j
     phases. The patch form computes ``(H+m-1)^2 m^2 s^2 / (H^2 k^2)`` times the useful
     multiply-adds (3.2x for the VAE's 3x3 -> 7x7 layer), this one none, at the cost of
     ``k*k`` adds on the block grid: faster where the input is small against the kernel,
-    slower elsewhere (measured per layer: docs/training.md).
+    slower elsewhere (measured per layer; only the decoder's 3x3 -> 7x7 layer takes it:
+    docs/encoders.md, "Speed on the CPU").
     """
     k, _, cin, cout = kernel.shape
     if x.shape[-1] != cin:

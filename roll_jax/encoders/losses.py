@@ -148,7 +148,8 @@ def lstm_loss(params: Any, model: LSTMEncoder, latents: jax.Array,
     else:
         occ_seq = insert_occlusion(latents, jax.lax.stop_gradient(occ_latent), occ_t)
         # Clean and occluded sequences through one scan: the LSTM's steps are sequential and
-        # small, so on a CPU a step's cost barely depends on the batch (docs/training.md).
+        # small, so on a CPU a step's cost barely depends on the batch (docs/encoders.md,
+        # "Losses").
         z, z_occ = jnp.split(lstm_encode(params, jnp.concatenate([latents, occ_seq]),
                                          model=model), 2)
     ae = jnp.mean(jnp.sum(jnp.square(z - latents), axis=-1))

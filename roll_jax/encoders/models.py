@@ -15,7 +15,7 @@ in 250 steps at beta=1). `decode` clips to [0, 1] for display. The log-variance 
 a floor, log(min_variance) + |dense| (reference code; keeps the posterior variance > 0).
 `decoder="broadcast"` (not in the paper) replaces the decoder's dense layer and first two
 transposed convs with a spatial broadcast decoder (`broadcast_grid`, then two 3x3 convs) before
-the last transposed conv; measured in docs/analysis.md ("A spatial broadcast decoder").
+the last transposed conv; measured in docs/encoders.md ("The cpu preset's encoder settings").
 
 LSTMEncoder: g_psi of "Robustness to Object Occlusions", a 2-layer LSTM (hidden 128) over the
 object-VAE latent means, then Dense(out_dim). Auto-encoder target: the paper's equation
@@ -98,7 +98,7 @@ class ConvVAE(nn.Module):
         if self.conv_impl in ("matmul", "matmul_patches"):
             self.convs = [conv.Conv(f, k, s) for f, k, s in _CONV]
             # The 3x3 -> 7x7 layer as col2im: its patch form wastes 3.2x the multiply-adds
-            # (docs/training.md, "Convolutions on the CPU").
+            # (docs/encoders.md, "Speed on the CPU").
             first = "col2im" if self.conv_impl == "matmul" else "patches"
             self.deconvs = [conv.ConvTranspose(f, k, s, first if i == 0 else "patches")
                             for i, (f, k, s) in enumerate(_DECONV)]

@@ -64,7 +64,7 @@ def _conv_fwd(x, kernel):
 def tap_weight_gradients(a, taps) -> list:
     """Each tap's sum over rows of ``tap [..., K]`` outer ``a [..., N]`` -> [K, N], as ``a^T tap``
     with ``a`` transposed once for all taps (conv.weight_gradient: XLA:CPU would otherwise
-    transpose each tap and run a slower dot form; docs/training.md)."""
+    transpose each tap and run a slower dot form; docs/segmentation.md)."""
     a_t = conv.transposed_rows(a)
     return [conv.weight_gradient(a_t, t) for t in taps]
 
@@ -73,7 +73,7 @@ def conv_backward(res, g, tap_gradients=tap_weight_gradients, shift_output: bool
     """(dx, dkernel) of `conv_dot_wgrad`: the input gradient as a conv with the flipped kernel;
     the kernel gradient by `tap_gradients` from the k*k shifted slices of the output gradient
     (``shift_output``) or of the input; None: of the thinner of the two (slicing copies them,
-    the thinner copies less: -11% on the width-8 U-Net's train step, docs/training.md).
+    the thinner copies less: -11% on the width-8 U-Net's train step, docs/segmentation.md).
 
     Tap (i, j) of the kernel gradient is ``sum_y x[y + d] g[y]`` with ``d = (i, j) - k // 2`` and
     zeros outside the image, which is also ``sum_z x[z] g[z - d]``: either ``x`` or ``g`` can
