@@ -56,12 +56,13 @@ def main(argv=None) -> int:
     if out == run or out.startswith(run + os.sep):
         p.error(f"--out {a.out} is inside the run directory {a.run}: evaluate writes nothing there")
     from roll_jax.analysis import evaluation  # JAX: only once the arguments are known to be good
+    from roll_jax.common.checkpoint import DamagedCheckpoint
 
     try:
         images = [evaluation.read_goal_image(path) for path in a.goal_image]
         loaded = evaluation.load_run(a.run, a.seg_ckpt, a.enc_ckpt)
         res = evaluation.evaluate(loaded, [im for im, _ in images], a.n_goals, a.seed)
-    except (FileNotFoundError, ValueError) as e:
+    except (FileNotFoundError, ValueError, DamagedCheckpoint) as e:
         p.error(str(e))
     for path, (_, note) in zip(a.goal_image, images):
         if note:

@@ -72,8 +72,13 @@ def load_run(run: str, seg_ckpt: str | None = None, enc_ckpt: str | None = None)
         pre = pretrain.load(enc_ckpt or inputs["enc_ckpt"], cfg)
     keys = jax.random.split(jax.random.PRNGKey(0), cfg.seeds)
     abstract = jax.eval_shape(lambda k: driver.init_states(cfg, env, k, pre), keys)
-    epoch, state = restore_train_state(mgr, abstract)
-    mgr.close()
+    def on_damaged(step: int, reason: str) -> None:  # the newest readable one is evaluated
+        run_dir.warn(f"checkpoint {ckpt}/{step} is damaged ({reason}); trying the one before it")
+
+    try:
+        epoch, state = restore_train_state(mgr, abstract, on_damaged)
+    finally:
+        mgr.close()
     frozen = Frozen(seg=seg, object_vae=None if pre.object_vae is None else pre.object_vae.params)
     return LoadedRun(cfg=cfg, env=env, frozen=frozen, state=state, epoch=int(epoch))
 

@@ -37,7 +37,9 @@ def train_state_manager(out: str, keep: int, create: bool = True):
     else:  # read only (evaluation): nothing saved, nothing pruned
         options = ocp.CheckpointManagerOptions(read_only=True, create=False, max_to_keep=None,
                                                save_interval_steps=0)
-    return ocp.CheckpointManager(os.path.abspath(os.path.join(out, "ckpt")), options=options)
+    # The handler named: `item_metadata` then reads a step's tree without restoring it.
+    return ocp.CheckpointManager(os.path.abspath(os.path.join(out, "ckpt")), options=options,
+                                 item_handlers=ocp.StandardCheckpointHandler())
 
 
 def _saveable(state) -> dict:
@@ -71,17 +73,90 @@ def save_train_state(mgr, epoch: int, state) -> None:
     mgr.save(epoch, args=ocp.args.StandardSave(_saveable(state)))
 
 
-def restore_train_state(mgr, abstract):
-    """(epoch, state) of the latest checkpoint, `abstract` giving the state's structure."""
+class DamagedCheckpoint(RuntimeError):
+    """No checkpoint of a run can be read."""
+
+
+def _short(e: BaseException) -> str:
+    """One line of an orbax / TensorStore error: its cause (the read that failed), without the
+    TensorStore spec it prints."""
+    cause = e.__cause__ or e.__context__
+    text = str(cause if cause is not None and str(cause) else e) or type(e).__name__
+    return text.split("See full TensorStore details")[0].strip().splitlines()[0][:300]
+
+
+_UNRAISABLE_FILTERED = False
+
+
+def _quiet_failed_reads() -> None:
+    """A failed restore leaves orbax's other array reads pending; when they finish after its
+    event loop closed, Python prints each one's traceback ("RuntimeError: Event loop is
+    closed", "Encountered error while reading array index"), hundreds of lines that say no
+    more than the error already reported. Those, and only those, are dropped from here on."""
+    global _UNRAISABLE_FILTERED
+    import sys
+
+    if _UNRAISABLE_FILTERED:
+        return
+    previous = sys.unraisablehook
+
+    def hook(u):
+        text = str(u.exc_value)
+        if (isinstance(u.exc_value, RuntimeError) and text == "Event loop is closed") or \
+                text.startswith("Encountered error while reading array"):
+            return
+        previous(u)
+
+    sys.unraisablehook = hook
+    _UNRAISABLE_FILTERED = True
+
+
+def _structure_mismatch(meta: dict, target: dict) -> str | None:
+    """How a checkpoint's arrays differ from the state's (another version of the code), or
+    None."""
+    if set(meta) != set(target):
+        return (f"{len(meta)} arrays saved, this version's TrainState has {len(target)}")
+    for k in sorted(target, key=int):
+        saved = tuple(getattr(meta[k], "shape", ()) or ())
+        if saved != tuple(target[k].shape):
+            return f"array {k} has shape {saved}, this version's is {tuple(target[k].shape)}"
+    return None
+
+
+def restore_train_state(mgr, abstract, on_damaged=None):
+    """(epoch, state) of the newest checkpoint that can be read, `abstract` giving the state's
+    structure. A step that cannot be read (a file truncated or missing) is passed to
+    `on_damaged(step, reason)` and the next older one is tried; DamagedCheckpoint when none
+    can be read. A checkpoint of another TrainState (another version of roll_jax) is a
+    ValueError saying so."""
     import orbax.checkpoint as ocp
 
-    step = mgr.latest_step()
     target = _saveable(abstract)
-    try:
-        saved = mgr.restore(step, args=ocp.args.StandardRestore(target))
-    except (ValueError, KeyError) as e:
-        raise ValueError(
-            f"the train state in {mgr.directory}/{step} does not fit this version's "
-            f"TrainState ({len(target)} arrays); it was written by another version of "
-            f"roll_jax (read it with that version): {str(e)[:160]}") from e
-    return step, _unsaveable(abstract, saved)
+    steps = sorted(mgr.all_steps(), reverse=True)
+    damaged = []
+    for step in steps:
+        try:
+            meta = dict(mgr.item_metadata(step))
+        except Exception as e:  # noqa: BLE001 (unreadable metadata: damaged, whatever raised)
+            reason = f"its metadata cannot be read ({_short(e)})"
+        else:
+            mismatch = _structure_mismatch(meta, target)
+            if mismatch:
+                raise ValueError(
+                    f"the train state in {mgr.directory}/{step} does not fit this version's "
+                    f"TrainState ({mismatch}); it was written by another version of roll_jax "
+                    f"(read it with that version)")
+            try:
+                saved = mgr.restore(step, args=ocp.args.StandardRestore(target))
+            except Exception as e:  # noqa: BLE001 (any read error: the step is damaged)
+                _quiet_failed_reads()
+                reason = _short(e)
+            else:
+                return step, _unsaveable(abstract, saved)
+        damaged.append(step)
+        if on_damaged is not None:
+            on_damaged(step, reason)
+    raise DamagedCheckpoint(
+        f"no checkpoint in {mgr.directory} can be read (damaged: "
+        f"{', '.join(map(str, damaged))}); nothing was changed. To start the run again, move "
+        f"or delete {mgr.directory} and train without --resume")

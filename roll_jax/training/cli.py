@@ -6,12 +6,13 @@
     python train.py ... --set total_env_steps=20000 sac.batch_size=256    (config overrides)
     python train.py ... --print-config           # the resolved config as JSON; runs nothing
     python train.py ... --seeds 8 --devices all  # seed axis sharded over the devices (or --devices N)
+    python train.py ... --distributed            # one process per host/GPU (docs/training.md)
     python train.py --algo random ...            # random-policy rollout frames only (viewer)
 
 (`roll-train` is the same command once the package is installed.) Writes DIR/config.json,
-DIR/metrics.csv, DIR/ckpt/ (orbax), DIR/plots/learning_curve.png, DIR/videos/eval_*.gif, and
-the fitted DIR/segmentation/ and DIR/encoders/ (reused on resume or given with --seg-ckpt /
---enc-ckpt).
+DIR/metrics.csv, DIR/tb/ (TensorBoard: `tensorboard --logdir runs`), DIR/ckpt/ (orbax),
+DIR/plots/learning_curve.png, DIR/videos/eval_*.gif, and the fitted DIR/segmentation/ and
+DIR/encoders/ (reused on resume or given with --seg-ckpt / --enc-ckpt).
 """
 
 from __future__ import annotations
@@ -116,7 +117,37 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed-batch", default="auto",
                    help="'auto' or N: seeds vmapped side by side per device, the rest run one "
                         "group after the other (auto: 1 on CPU, all on GPU/TPU)")
+    d = p.add_argument_group(
+        "several processes (hosts or GPUs)",
+        "Start the same command once per process, with the same --out on a shared filesystem: "
+        "the seeds are sharded over the devices of all processes, process 0 writes the files.")
+    d.add_argument("--distributed", action="store_true",
+                   help="call jax.distributed.initialize() first; under SLURM, Open MPI and "
+                        "other clusters JAX finds the processes itself, elsewhere give the "
+                        "three flags below (any of them implies --distributed)")
+    d.add_argument("--coordinator", default=None, metavar="HOST:PORT",
+                   help="address of process 0's coordinator service (default: "
+                        "$JAX_COORDINATOR_ADDRESS or the cluster's)")
+    d.add_argument("--num-processes", type=int, default=None, metavar="N",
+                   help="how many processes take part")
+    d.add_argument("--process-id", type=int, default=None, metavar="I",
+                   help="this process's index, 0 .. N-1")
     return p
+
+
+def distributed(a, p) -> None:
+    """jax.distributed.initialize for --distributed / --coordinator / --num-processes /
+    --process-id (before anything asks JAX for its devices); errors as one message."""
+    given = {"coordinator_address": a.coordinator, "num_processes": a.num_processes,
+             "process_id": a.process_id}
+    if not (a.distributed or any(v is not None for v in given.values())):
+        return
+    from roll_jax.training import sharding
+
+    try:
+        sharding.initialize_distributed(**given)
+    except (ValueError, RuntimeError) as e:
+        p.error(f"--distributed: {e}")
 
 
 def resolve(a, p):
@@ -172,6 +203,7 @@ def parse_args(argv=None):
     a = p.parse_args(argv)
     cfg, out = resolve(a, p)
     if a.algo != "random" and not a.print_config:
+        distributed(a, p)
         check_run(a, p, cfg, out)
     return a, cfg, out
 
@@ -245,19 +277,32 @@ def main(argv=None) -> int:
     if a.print_config:
         print(json.dumps(dataclasses.asdict(cfg), indent=2))
         return 0
+    if a.algo != "random":
+        return train(a, cfg, out)
     os.makedirs(out, exist_ok=True)
-    if a.algo == "random":
-        with open(os.path.join(out, "config.json"), "w") as f:
-            json.dump(dataclasses.asdict(cfg), f, indent=2)
-        print(json.dumps(run_random(cfg), indent=2))
-        return 0
-    from roll_jax.training import compiler, driver
+    with open(os.path.join(out, "config.json"), "w") as f:
+        json.dump(dataclasses.asdict(cfg), f, indent=2)
+    print(json.dumps(run_random(cfg), indent=2))
+    return 0
+
+
+def train(a, cfg, out) -> int:
+    """The training run; what refuses it once it started (another process training into
+    --out, an event directory that cannot be written, only damaged checkpoints to resume
+    from) is one line on stderr and exit code 1, with nothing written lost."""
+    from roll_jax.common.checkpoint import DamagedCheckpoint
+    from roll_jax.training import compiler, driver, events, run_dir
 
     if a.compile_cache != "off":
         compiler.use(a.compile_cache or compiler.default_dir())
     t0 = time.time()
-    rows = driver.run(cfg, out, resume=a.resume, seg_ckpt=a.seg_ckpt, enc_ckpt=a.enc_ckpt,
-                     seed=a.seed, devices=a.devices, seed_batch=a.seed_batch)
+    try:
+        rows = driver.run(cfg, out, resume=a.resume, seg_ckpt=a.seg_ckpt,
+                          enc_ckpt=a.enc_ckpt, seed=a.seed, devices=a.devices,
+                          seed_batch=a.seed_batch)
+    except (run_dir.RunLocked, events.EventDirNotWritable, DamagedCheckpoint) as e:
+        print(f"error: {e}", file=sys.stderr, flush=True)
+        return 1
     last = [r for r in rows if r["env_steps"] == rows[-1]["env_steps"]]
     print(json.dumps({"out": out, "env_steps": rows[-1]["env_steps"], "seeds": cfg.seeds,
                       "final_distance_per_seed": [r["final_distance"] for r in last],

@@ -2,12 +2,15 @@
 
 `run(cfg, out, ...)` is what `train.py` calls. Every `eval_every_epochs`-th chunk also
 evaluates the policy it starts from (test envs in the collection batch,
-`collect.collect_episode`; the other chunks run a program without them); between chunks Python logs
-metrics.csv, checkpoints (orbax, the whole train state including the replay buffer), plots the
-learning curve and drives the progress bar; at the end it writes timings.json (wall and CPU
-seconds per phase; the first chunk's include its compile). Seeds are the state's leading
-axis, vmapped or mapped (`roll_jax.training.sharding.over_seeds`); with several devices that axis is
-sharded over them. A finished run gets `COMPLETE_MARKER` (complete.json), written atomically last.
+`collect.collect_episode`; the other chunks run a program without them); between chunks Python
+logs every chunk's training metrics and speed to TensorBoard (DIR/tb, `events`), appends each
+evaluation to metrics.csv and TensorBoard, checkpoints (orbax, the whole train state including
+the replay buffer), plots the learning curve and drives the progress bar; at the end it writes
+timings.json (wall and CPU seconds per phase; the first chunk's include its compile). Seeds are
+the state's leading axis, vmapped or mapped (`roll_jax.training.sharding.over_seeds`); with
+several devices that axis is sharded over them, on one host or several (process 0 writes the
+files). A finished run gets `COMPLETE_MARKER` (complete.json), written atomically last. While it
+runs, DIR/train.lock names its process: a second run into DIR is refused.
 """
 
 from __future__ import annotations
@@ -26,7 +29,7 @@ from configs.train import TrainConfig
 from roll_jax.common.checkpoint import restore_train_state, save_train_state, train_state_manager
 from roll_jax.encoders import pretrain
 from roll_jax.encoders.goal_encoding import Frozen, goal_encoder
-from roll_jax.training import loop, plots, run_dir
+from roll_jax.training import events, loop, plots, run_dir
 from roll_jax.training import sharding as shd
 from roll_jax.training.run_dir import COMPLETE_MARKER, check_resume
 from roll_jax.training.state import TrainState, eval_only_plan, init_state, plan_chunk
@@ -165,17 +168,75 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
         pretrain_cache: str | None = None) -> list[dict]:
     """Train `cfg.seeds` seeds; returns the metrics rows. `stop_after_epochs` ends early (as an
     interruption would; tests use it for resume). `devices` ('all' or N) shards the seed axis
-    over that many devices (seeds must divide evenly); one device is the unsharded path.
-    `seed_batch` ('auto' or N): seeds vmapped together per device, the rest mapped
-    (`sharding.resolve_seed_batch`). `pretrain_cache`: a directory of pre-training datasets
-    and models shared between runs (the reproduction grid's)."""
+    over that many devices (seeds must divide evenly), those of every process after
+    `jax.distributed.initialize`; one device is the unsharded path. `seed_batch` ('auto' or N):
+    seeds vmapped together per device, the rest mapped (`sharding.resolve_seed_batch`).
+    `pretrain_cache`: a directory of pre-training datasets and models shared between runs (the
+    reproduction grid's).
+
+    Refused before anything is written: a directory another live process trains into
+    (`run_dir.RunLocked`), an event directory that cannot be written
+    (`events.EventDirNotWritable`); with `resume`, a run whose checkpoints are all damaged
+    (`DamagedCheckpoint`) after setup."""
+    if resume:
+        check_resume(out, cfg, seed)
+    sharding = shd.make(devices, cfg.seeds)  # the divisibility error comes before any compile
+    lock = run_dir.lock_run(out) if shd.is_main_process() else None
+    try:
+        if lock is not None:
+            events.check_writable(out)
+        return _run(cfg, out, resume, seg_ckpt, enc_ckpt, seed, progress, stop_after_epochs,
+                    sharding, seed_batch, pretrain_cache)
+    finally:
+        if lock is not None:
+            lock.release()
+
+
+def _restore(cfg: TrainConfig, out: str, mgr, state):
+    """(epoch, state, manager) from the newest readable checkpoint. A damaged step is named on
+    stderr and the one before it tried; once one restores, the damaged step directories are
+    moved to DIR/ckpt_damaged/ (kept, and out of the way of the steps the run saves again).
+    When none restores they stay where they are (DamagedCheckpoint)."""
+    # The live state's placement (one device, or the seed sharding): a checkpoint written on
+    # another device count restores onto this one.
+    abstract = jax.tree.map(
+        lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=x.sharding), state)
+    ckpt = os.path.join(out, "ckpt")
+    damaged = []
+
+    def on_damaged(step: int, reason: str) -> None:
+        damaged.append(step)
+        run_dir.warn(f"checkpoint {ckpt}/{step} (epoch {step}) is damaged: {reason}")
+
+    epoch, state = restore_train_state(mgr, abstract, on_damaged)
+    if damaged:
+        moved = []
+        if shd.is_main_process():
+            for step in damaged:
+                dst = os.path.join(out, "ckpt_damaged", str(step))
+                n = 1
+                while os.path.exists(dst):
+                    dst, n = os.path.join(out, "ckpt_damaged", f"{step}.{n}"), n + 1
+                os.makedirs(os.path.dirname(dst), exist_ok=True)
+                os.replace(os.path.join(ckpt, str(step)), dst)
+                moved.append(dst)
+            run_dir.warn(f"resuming from {ckpt}/{epoch} ({epoch * cfg.epoch_env_steps} env "
+                         f"steps); the damaged checkpoint(s) moved to {', '.join(moved)}")
+        if jax.process_count() > 1:  # every process's manager sees the steps moved
+            from jax.experimental import multihost_utils
+
+            multihost_utils.sync_global_devices("roll_jax: damaged checkpoints moved")
+        mgr.close()  # a manager that knows the steps left
+        mgr = train_state_manager(out, cfg.keep_checkpoints)
+    return epoch, state, mgr
+
+
+def _run(cfg: TrainConfig, out: str, resume: bool, seg_ckpt, enc_ckpt, seed: int,
+         progress: bool, stop_after_epochs, sharding, seed_batch, pretrain_cache) -> list[dict]:
     from tqdm import tqdm
 
     import envs_mjx
 
-    if resume:
-        check_resume(out, cfg, seed)
-    sharding = shd.make(devices, cfg.seeds)  # the divisibility error comes before any compile
     n_devices = 1 if sharding is None else sharding.n_devices
     per_device = shd.resolve_seed_batch(seed_batch, cfg.seeds, n_devices)
     main = shd.is_main_process()
@@ -202,20 +263,24 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
     frozen = jax.device_put(frozen, jax.devices()[0]) if sharding is None else (
         sharding.replicate(frozen))
     mgr = train_state_manager(out, cfg.keep_checkpoints)
-    rows: list[dict] = []
     csv_path = os.path.join(out, "metrics.csv")
     start_epoch = 0
     if resume and mgr.latest_step() is not None:
-        # The live state's placement (one device, or the seed sharding): a checkpoint
-        # written on another device count restores onto this one.
-        abstract = jax.tree.map(
-            lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=x.sharding), state)
-        start_epoch, state = restore_train_state(mgr, abstract)
+        start_epoch, state, mgr = _restore(cfg, out, mgr, state)
         if sharding is not None:
             state = sharding.shard(state)
-        # Rows of the chunks before the checkpoint; a finished run's final evaluation too.
-        rows = run_dir.read_rows(csv_path, start_epoch * cfg.epoch_env_steps,
-                         final=start_epoch == cfg.n_epochs)
+    # metrics.csv and the event files as of the checkpoint (a new run: empty): what the chunks
+    # after it logged is dropped, they run again. Rows before it; a finished run's final
+    # evaluation too.
+    keep = start_epoch * cfg.epoch_env_steps if resume else None
+    final = start_epoch == cfg.n_epochs
+    if main:
+        rows = run_dir.restart_rows(csv_path, keep, final)
+        log = events.EventLog(out, keep, final)
+        if keep is None:
+            log.config(run_dir.config_json(cfg))
+    else:
+        rows, log = run_dir.read_rows(csv_path, -1 if keep is None else keep, final), None
     end_epoch = cfg.n_epochs if stop_after_epochs is None else min(cfg.n_epochs, stop_after_epochs)
     # Two programs: chunks whose evaluation is logged run the test envs beside the training
     # envs, the others leave them out. The second compiles in the background from the start.
@@ -231,41 +296,70 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
     def log_evaluation(env_steps: int, ev: dict) -> None:
         """One metrics.csv row per seed: the evaluation of the policy after `env_steps` and
         the training metrics of the chunk that ended there (zeros at 0)."""
+        new = []
         for s in range(cfg.seeds):
             row = {"env_steps": env_steps, "seed": s,
                    "final_distance": float(ev["final_distance"][s]),
                    "final_distance_median": float(ev["final_distance_median"][s]),
                    "start_distance": float(ev["start_distance"][s])}
             row.update({k: float(v[s]) for k, v in ev["train"].items()})
-            rows.append(row)
+            new.append(row)
+        rows.extend(new)
         if main:
             run_dir.write_gif(os.path.join(out, "videos", f"eval_{env_steps:08d}.gif"),
                               ev["video"][0], ev["goal_image"][0])
-            run_dir.write_rows(csv_path, rows)
+            run_dir.append_rows(csv_path, new)
+            log.evaluation(env_steps, ev)
+            log.flush()
             plots.learning_curve(rows, os.path.join(out, "plots", "learning_curve.png"),
                            f"{cfg.task} ({cfg.algo}, {cfg.seeds} seeds)")
 
     bar = tqdm(range(start_epoch, end_epoch), desc=f"{cfg.task} {cfg.algo}", unit="epoch",
                disable=not (progress and main), initial=start_epoch, total=cfg.n_epochs)
-    t_last, steps_last = time.perf_counter(), start_epoch * cfg.epoch_env_steps
-    for epoch in bar:
-        plan = plan_chunk(cfg, epoch)
-        evaluate = epoch % cfg.eval_every_epochs == 0
-        with times("chunks"):  # the first of each program includes tracing and compiling it
-            state, metrics = chunks[evaluate](state, frozen, plan)
-            metrics = shd.to_host(metrics)
-        env_steps = (epoch + 1) * cfg.epoch_env_steps
-        check_finite(metrics["train"], env_steps, epoch, os.path.join(out, "ckpt"))
-        if evaluate:
-            log_evaluation(epoch * cfg.epoch_env_steps, metrics["eval"])
+    t_last = time.perf_counter()
+    try:
+        for epoch in bar:
+            plan = plan_chunk(cfg, epoch)
+            evaluate = epoch % cfg.eval_every_epochs == 0
+            with times("chunks"):  # the first of each program includes tracing and compiling
+                state, metrics = chunks[evaluate](state, frozen, plan)
+                metrics = shd.to_host(metrics)
+            env_steps = (epoch + 1) * cfg.epoch_env_steps
+            check_finite(metrics["train"], env_steps, epoch, os.path.join(out, "ckpt"))
             now = time.perf_counter()
-            rate = (env_steps - steps_last) * cfg.seeds / max(now - t_last, 1e-9)
-            t_last, steps_last = now, env_steps
-            bar.set_postfix(dist=f"{np.median(metrics['eval']['final_distance']):.3f}",
-                            start=f"{np.median(metrics['eval']['start_distance']):.3f}",
-                            sps=f"{rate:.0f}")
-        if (epoch + 1) % cfg.checkpoint_every_epochs == 0 or epoch + 1 == cfg.n_epochs:
-            save_train_state(mgr, epoch + 1, state)
+            # Chunk end to chunk end: the chunk and the host's work between chunks.
+            rate = cfg.epoch_env_steps * cfg.seeds / max(now - t_last, 1e-9)
+            if main:
+                log.chunk(env_steps, metrics["train"], now - t_last, rate, now - t_run)
+            t_last = now
+            if evaluate:
+                log_evaluation(epoch * cfg.epoch_env_steps, metrics["eval"])
+                bar.set_postfix(dist=f"{np.median(metrics['eval']['final_distance']):.3f}",
+                                start=f"{np.median(metrics['eval']['start_distance']):.3f}",
+                                sps=f"{rate:.0f}")
+            elif main:
+                log.flush()
+            if (epoch + 1) % cfg.checkpoint_every_epochs == 0 or epoch + 1 == cfg.n_epochs:
+                save_train_state(mgr, epoch + 1, state)
+        _finish(cfg, state, frozen, chunks, mgr, rows, times, end_epoch, log_evaluation)
+    finally:
+        if log is not None:
+            log.close()
+    if main:
+        with open(os.path.join(out, "timings.json"), "w") as f:
+            json.dump({**times.as_dict(), "total_wall_s": round(time.perf_counter() - t_run, 2),
+                       "total_cpu_s": round(time.process_time() - c_run, 2)}, f, indent=2)
+    if main and end_epoch == cfg.n_epochs:
+        run_dir.write_atomic(os.path.join(out, COMPLETE_MARKER), json.dumps(
+            {"env_steps": cfg.total_env_steps, "seeds": cfg.seeds, "task": cfg.task,
+             "algo": cfg.algo, "devices": n_devices, "seed_batch": per_device},
+            indent=2))
+    return rows
+
+
+def _finish(cfg, state, frozen, chunks, mgr, rows, times, end_epoch, log_evaluation):
+    """The last checkpoint on disk and, for a run that reached its end, the final policy's
+    evaluation (unless a resumed finished run has it already)."""
     mgr.wait_until_finished()  # the state is donated below: the checkpoint must be on disk
     evaluated = any(r["env_steps"] == cfg.total_env_steps for r in rows)  # resumed, finished
     if end_epoch == cfg.n_epochs and not evaluated:
@@ -277,13 +371,3 @@ def run(cfg: TrainConfig, out: str, resume: bool = False, seg_ckpt: str | None =
         log_evaluation(cfg.total_env_steps, metrics["eval"])
     mgr.wait_until_finished()
     mgr.close()
-    if main:
-        with open(os.path.join(out, "timings.json"), "w") as f:
-            json.dump({**times.as_dict(), "total_wall_s": round(time.perf_counter() - t_run, 2),
-                       "total_cpu_s": round(time.process_time() - c_run, 2)}, f, indent=2)
-    if main and end_epoch == cfg.n_epochs:
-        run_dir.write_atomic(os.path.join(out, COMPLETE_MARKER), json.dumps(
-            {"env_steps": cfg.total_env_steps, "seeds": cfg.seeds, "task": cfg.task,
-             "algo": cfg.algo, "devices": n_devices, "seed_batch": per_device},
-            indent=2))
-    return rows

@@ -13,8 +13,12 @@ per-seed VAE convolutions become grouped convolutions and a 2-seed smoke chunk r
 than one seed after the other, at 2.5x the CPU time). `over_seeds` builds either; the math per
 seed is the same, the float rounding is not bit-identical between the two.
 
-Multi-host: call `jax.distributed.initialize()` before anything else; `devices("all")` is
-then the global device list, and `to_host` gathers the seed axis to every process.
+Several processes (hosts, or one per GPU): `initialize_distributed` (train.py --distributed)
+before anything else asks JAX for devices; `jax.devices()` is then the global device list,
+the mesh spans every process's devices, each process builds and runs its own seeds' shards, and
+`to_host` gathers the metrics to every process (on a CPU over gloo). Process 0 writes the run's
+files, orbax writes each process's shards of a checkpoint (tests/test_multihost.py: two
+processes on one machine against one).
 """
 
 from __future__ import annotations
@@ -174,6 +178,40 @@ def to_host(tree):
     from jax.experimental import multihost_utils
 
     return multihost_utils.process_allgather(tree, tiled=True)
+
+
+def initialize_distributed(coordinator_address: str | None = None,
+                           num_processes: int | None = None, process_id: int | None = None) -> None:
+    """`jax.distributed.initialize` with what is given (None: JAX's cluster detection, SLURM,
+    Open MPI, ..., or $JAX_COORDINATOR_ADDRESS). On a CPU backend the processes' collectives
+    (the metrics' all-gather) go over gloo."""
+    kwargs = {k: v for k, v in (("coordinator_address", coordinator_address),
+                                ("num_processes", num_processes),
+                                ("process_id", process_id)) if v is not None}
+    jax.config.update("jax_cpu_collectives_implementation", "gloo")
+    jax.distributed.initialize(**kwargs)
+    if jax.process_count() > 1:
+        _mjx_on_local_device()
+
+
+def _mjx_on_local_device() -> None:
+    """MJX places a model or data given no device on `jax.devices()[0]`, which in a process
+    other than the first is another process's device (`mjx.make_data` then fails, as does every
+    env built by `envs_mjx.make`). Here the device MJX picks is this process's first one; the
+    arrays are per-process copies either way (the train state is placed by the seed sharding)."""
+    try:
+        from mujoco.mjx._src import io
+    except ImportError:  # another MJX layout: left as it is
+        return
+    resolve = getattr(io, "_resolve_impl_and_device", None)
+    if resolve is None or getattr(resolve, "_roll_local", False):
+        return
+
+    def local(impl=None, device=None):
+        return resolve(impl, jax.local_devices()[0] if device is None else device)
+
+    local._roll_local = True
+    io._resolve_impl_and_device = local
 
 
 def is_main_process() -> bool:
