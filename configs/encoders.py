@@ -51,6 +51,9 @@ DECODERS = ("deconv", "broadcast")  # roll_jax.encoders.models.DECODERS
 
 # The VAE matching loss's occlusions (roll_jax.encoders.losses.OCCLUSIONS implements each).
 OCCLUSION_SHAPES = ("pixels", "edge")
+# The occlusion retrieval analysis (roll_jax.analysis.occlusion; `roll-analysis occlusion`).
+OCCLUSION_DROP = 0.85  # Appendix A: "removing 85% of the pixels"
+HURDLE_TASKS = ("hurdle_bottom", "hurdle_top")  # with a path around a wall (scenes.hurdle_path)
 
 
 @dataclasses.dataclass(frozen=True)

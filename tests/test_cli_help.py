@@ -28,9 +28,16 @@ import argparse, json, sys
 undocumented = []
 _parse = argparse.ArgumentParser.parse_args
 
+def flags_without_help(parser):
+    out = [a.option_strings[-1] for a in parser._actions if a.option_strings and not a.help]
+    for a in parser._actions:  # and those of its subcommands
+        if isinstance(a, argparse._SubParsersAction):
+            for sub in a.choices.values():
+                out += flags_without_help(sub)
+    return out
+
 def parse_args(self, *args, **kwargs):
-    undocumented.extend(a.option_strings[-1] for a in self._actions
-                        if a.option_strings and not a.help)
+    undocumented.extend(flags_without_help(self))
     return _parse(self, *args, **kwargs)
 
 argparse.ArgumentParser.parse_args = parse_args
@@ -60,18 +67,21 @@ def scripts() -> dict[str, str]:
         return tomllib.load(f)["project"]["scripts"]
 
 
-# The commands whose --help must not wait for JAX (the console script -> its module).
+# The commands whose --help must not wait for JAX (the console script -> its module): all.
 LIGHT = {"roll-train": "roll_jax.training.cli", "roll-evaluate": "roll_jax.analysis.evaluate",
          "roll-reproduce": "roll_jax.training.reproduce",
-         "roll-segmentation": "roll_jax.segmentation.__main__"}
+         "roll-segmentation": "roll_jax.segmentation.__main__",
+         "roll-pretrain": "roll_jax.encoders.cli", "roll-analysis": "roll_jax.analysis.__main__",
+         "roll-compare": "roll_jax.analysis.compare"}
+ANALYSES = ("latent-vs-distance", "occlusion", "reward-probe", "diagnose", "compare",
+            "policy-panel")
 
 
 def test_console_scripts_point_at_mains():
     import importlib
 
     got = scripts()
-    assert set(got) == {"roll-train", "roll-evaluate", "roll-reproduce", "roll-pretrain",
-                        "roll-analysis", "roll-segmentation"}
+    assert set(got) == set(LIGHT)
     for name, target in got.items():
         module, _, func = target.partition(":")
         assert callable(getattr(importlib.import_module(module), func)), name
@@ -86,6 +96,26 @@ def test_help_explains_every_flag_without_jax(script):
     assert "usage:" in out and "--help" in out
 
 
+@pytest.mark.parametrize("cmd", ANALYSES)
+def test_every_analysis_explains_every_flag_without_jax(cmd):
+    out, _, report = probe("roll_jax.analysis.__main__", cmd, "--help")
+    assert report == {"code": 0, "heavy": [], "undocumented": []}, report
+    assert f"roll-analysis {cmd}" in out
+
+
+def test_module_forms_answer_help_without_jax():
+    """`python -m roll_jax.encoders.pretrain --help` runs the module itself: its command
+    parses before the module's JAX imports."""
+    code = ("import runpy, sys; sys.argv = ['pretrain', '--help']\n"
+            "try:\n    runpy.run_module('roll_jax.encoders.pretrain', run_name='__main__')\n"
+            "except SystemExit as e:\n    assert e.code == 0, e.code\n"
+            f"print(sorted(m for m in {HEAVY!r} if m in sys.modules))")
+    proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True,
+                          text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert "usage: roll-pretrain" in proc.stdout and proc.stdout.splitlines()[-1] == "[]"
+
+
 def test_train_help_lists_the_tasks_algorithms_and_presets():
     out, _, _ = probe("roll_jax.training.cli", "--help")
     flat = " ".join(out.split())  # argparse wraps the help lines
@@ -96,6 +126,19 @@ def test_train_help_lists_the_tasks_algorithms_and_presets():
     flat = " ".join(out.split())
     assert f"some of {', '.join(TASKS)}" in flat and f"some of {', '.join(ALGOS)}" in flat
     assert f"one of {', '.join(PRESETS)}" in flat
+    from configs.encoders import ALGOS as PRETRAIN_ALGOS
+    from configs.encoders import HURDLE_TASKS
+
+    out, _, _ = probe("roll_jax.encoders.cli", "--help")
+    flat = " ".join(out.split())
+    assert f"one of {', '.join(TASKS)}" in flat
+    assert f"one of {', '.join(PRETRAIN_ALGOS)} (default roll)" in flat
+    assert f"one of {', '.join(PRESETS)} (configs/presets.py; default cpu)" in flat
+    for cmd, tasks in (("latent-vs-distance", TASKS), ("occlusion", HURDLE_TASKS)):
+        out, _, _ = probe("roll_jax.analysis.__main__", cmd, "--help")
+        flat = " ".join(out.split())
+        assert f"one of {', '.join(tasks)}" in flat and f"one of {', '.join(PRESETS)}" in flat
+        assert "--ckpt DIR" in flat and "--run RUN" in flat
 
 
 def test_the_default_preset_is_cpu(train_cli, tmp_path):
@@ -106,6 +149,10 @@ def test_the_default_preset_is_cpu(train_cli, tmp_path):
     assert a.preset == cfg.preset == "cpu" and out == os.path.join("runs", "puck_push_roll_cpu")
     assert reproduce.parse_args(["--out", str(tmp_path)])[0].preset == "cpu"
     assert seg_cli.parse_args(["--task", "puck_push", "--out", str(tmp_path)]).preset == "cpu"
+    from roll_jax.encoders import cli as pretrain_cli
+
+    assert pretrain_cli.make_parser().parse_args(
+        ["--task", "puck_push", "--out", str(tmp_path)]).preset == "cpu"
 
 
 def test_print_config_prints_the_resolved_config_and_runs_nothing(tmp_path):
@@ -208,3 +255,50 @@ def test_reproduce_runs_and_reports_an_oracle_cell(tmp_path):
                            "--out", str(grid)], run_fn=fake_run) == 0
     assert calls == [("puck_push", "oracle", str(grid / "runs" / "puck_push__oracle"))]
     assert "| puck_push | state oracle | 1000 | 2 |" in (grid / "results.md").read_text()
+
+
+def test_analyses_read_a_run_or_a_pretraining_directory_and_never_guess_its_preset(
+        tmp_path, capsys):
+    """A pretraining directory says its task and preset in pretrain.json, a run in its
+    config.json; a directory that says neither is refused (it once fell back to the paper
+    preset, whose encoder sizes are not the cpu preset's), unless --preset is given."""
+    from roll_jax.analysis import __main__ as analysis
+    from roll_jax.analysis import checkpoints
+    from roll_jax.training import run_dir
+
+    bare = tmp_path / "bare"
+    bare.mkdir()
+    with pytest.raises(ValueError, match="no pretrain.json .* nor config.json .* give --preset"):
+        checkpoints.checkpoint_preset(str(bare), "puck_push")
+    assert checkpoints.checkpoint_config(str(bare), "puck_push", "cpu").preset == "cpu"
+    for argv, msg in (
+            (["latent-vs-distance", "--ckpt", str(bare)], "give --task"),
+            (["latent-vs-distance", "--ckpt", str(bare), "--task", "puck_push"],
+             "give --preset"),
+            (["occlusion", "--ckpt", str(bare), "--task", "puck_push"], "unknown --task")):
+        with pytest.raises(SystemExit) as e:
+            analysis.main(argv)
+        assert msg in str(e.value) + capsys.readouterr().err, argv
+    # A run directory: its config and the inputs it trained with.
+    run = tmp_path / "run"
+    run.mkdir()
+    cfg = build_config("hurdle_top", "roll", "smoke", overrides=["sac.batch_size=32"])
+    run_dir.write_config(str(run), cfg)
+    run_dir.write_inputs(str(run), None, str(tmp_path / "enc"), 0)
+    assert checkpoints.checkpoint_config(str(run)) == cfg
+    assert checkpoints.checkpoint_task(str(run)) == "hurdle_top"
+    assert checkpoints.checkpoint_paths(str(run)) == (str(run / "segmentation"),
+                                                      str(tmp_path / "enc"))
+    with pytest.raises(ValueError, match="trained task 'hurdle_top', not 'puck_push'"):
+        checkpoints.checkpoint_config(str(run), "puck_push")
+    with pytest.raises(ValueError, match="preset 'smoke', not 'paper'"):
+        checkpoints.checkpoint_preset(str(run), "hurdle_top", "paper")
+    for argv, msg in (
+            (["occlusion", "--run", str(run)], "--run needs --out"),
+            (["occlusion", "--run", str(run), "--out", str(run / "a")], "inside the run"),
+            (["occlusion", "--run", str(bare), "--out", str(tmp_path / "a")],
+             "not a train.py run directory"),
+            (["occlusion", "--run", str(run), "--ckpt", str(bare)], "not allowed with")):
+        with pytest.raises(SystemExit):
+            analysis.main(argv)
+        assert msg in capsys.readouterr().err, argv

@@ -1,6 +1,7 @@
 """Pretrained encoders as the analyses' inputs: a `python -m roll_jax.encoders.pretrain --out`
-directory (segmentation/, encoders/, pretrain.json) loaded with the config it was made with,
-and its encoders as numpy callables over fixed-size batches."""
+directory (segmentation/, encoders/, pretrain.json) or a `train.py --out` run directory (its
+config.json, and the segmentation and encoders its inputs.json names) loaded with the config
+they were made with, and the encoders as numpy callables over fixed-size batches."""
 
 from __future__ import annotations
 
@@ -19,21 +20,53 @@ from roll_jax.encoders.goal_encoding import Frozen, GoalEncoder, goal_encoder
 from roll_jax.segmentation import pipeline
 
 
-def load_checkpoint(ckpt: str, task: str, preset: str | None = None):
-    """(cfg, Pretrained, seg params) from a `roll_jax.encoders.pretrain --out` directory. The preset is
-    read from DIR/pretrain.json when not given (it sets the LSTM training config), and so are
-    the pretraining's `--set` overrides."""
+def load_checkpoint(ckpt: str, task: str | None = None, preset: str | None = None):
+    """(cfg, Pretrained, seg params) of a pretraining or a run directory
+    (`checkpoint_config`, `checkpoint_paths`)."""
     cfg = checkpoint_config(ckpt, task, preset)
-    pre = pretrain.load(os.path.join(ckpt, "encoders"), cfg)
-    seg, _ = pipeline.load(os.path.join(ckpt, "segmentation"), task)
+    seg_dir, enc_dir = checkpoint_paths(ckpt)
+    pre = pretrain.load(enc_dir, cfg)
+    seg, _ = pipeline.load(seg_dir, cfg.task)
     return cfg, pre, seg
 
 
-def checkpoint_config(ckpt: str, task: str, preset: str | None = None):
-    """The ROLL config a `roll_jax.encoders.pretrain --out` directory was made with: its preset (or
-    `preset`) and its `--set` overrides, both from DIR/pretrain.json."""
-    return build_config(task, "roll", checkpoint_preset(ckpt, task, preset),
-                        overrides=_pretrain_info(ckpt).get("overrides", []))
+def is_run(ckpt: str) -> bool:
+    """A train.py run directory (config.json) rather than a pretraining one."""
+    return os.path.exists(os.path.join(ckpt, "config.json"))
+
+
+def checkpoint_paths(ckpt: str) -> tuple[str, str]:
+    """(segmentation dir, encoders dir): a pretraining directory's own; a run's, as its
+    inputs.json names them (its own sub-directories, or the --seg-ckpt / --enc-ckpt it was
+    given)."""
+    if is_run(ckpt):
+        from roll_jax.training import run_dir
+
+        inputs = run_dir.read_inputs(ckpt)
+        return (inputs.get("seg_ckpt", os.path.join(ckpt, "segmentation")),
+                inputs.get("enc_ckpt", os.path.join(ckpt, "encoders")))
+    return os.path.join(ckpt, "segmentation"), os.path.join(ckpt, "encoders")
+
+
+def checkpoint_config(ckpt: str, task: str | None = None, preset: str | None = None):
+    """The config a directory's encoders were made with: a run's config.json; a pretraining
+    directory's preset (or `preset`), algorithm (ROLL where it does not say) and `--set`
+    overrides from DIR/pretrain.json (`checkpoint_preset` refuses a directory that says
+    neither)."""
+    if is_run(ckpt):
+        from roll_jax.training import run_dir
+
+        cfg = run_dir.read_config(ckpt)
+        if task is not None and cfg.task != task:
+            raise ValueError(f"run {ckpt} trained task {cfg.task!r}, not {task!r}")
+        if preset is not None and cfg.preset != preset:
+            raise ValueError(f"run {ckpt} was trained with preset {cfg.preset!r}, not "
+                             f"{preset!r} (leave --preset out: a run's config.json says it)")
+        return cfg
+    task = checkpoint_task(ckpt, task)
+    info = _pretrain_info(ckpt)
+    return build_config(task, info.get("algo", "roll"), checkpoint_preset(ckpt, task, preset),
+                        overrides=info.get("overrides", []))
 
 
 def _pretrain_info(ckpt: str) -> dict:
@@ -44,14 +77,38 @@ def _pretrain_info(ckpt: str) -> dict:
         return json.load(f)
 
 
+def checkpoint_task(ckpt: str, task: str | None = None) -> str:
+    """`task`, or the one the directory was made for (pretrain.json, config.json); refuses a
+    directory of another task, and a directory that does not say when `task` is None."""
+    if is_run(ckpt):
+        from roll_jax.training import run_dir
+
+        saved = run_dir.read_config(ckpt).task
+    else:
+        saved = _pretrain_info(ckpt).get("task")
+    if task is not None and saved not in (None, task):
+        raise ValueError(f"checkpoint {ckpt} was made for task {saved!r}, not {task!r}")
+    if task is None and saved is None:
+        raise ValueError(f"{ckpt} has no pretrain.json (roll-pretrain writes one) nor "
+                         f"config.json (a train.py run): give --task")
+    return task or saved
+
+
 def checkpoint_preset(ckpt: str, task: str | None = None, preset: str | None = None) -> str:
-    """`preset`, or the one a `roll_jax.encoders.pretrain --out` directory was made with
-    (DIR/pretrain.json; "paper" without one); refuses a checkpoint of another `task`."""
+    """`preset`, or the one the directory was made with (a pretraining directory's
+    pretrain.json, a run's config.json); refuses a checkpoint of another `task`, and a
+    directory that says neither: its encoders' sizes depend on the preset, a guess would load
+    them with the wrong config."""
+    if is_run(ckpt):
+        return checkpoint_config(ckpt, task, preset).preset
     info = _pretrain_info(ckpt)
-    if task is not None and info.get("task") not in (None, task):
-        raise ValueError(f"checkpoint {ckpt} was pretrained for task {info['task']!r}, "
-                         f"not {task!r}")
-    return preset or info.get("preset", "paper")
+    if task is not None:
+        checkpoint_task(ckpt, task)  # refuses another task's checkpoint
+    if preset is None and "preset" not in info:
+        raise ValueError(f"{ckpt} has no pretrain.json (roll-pretrain writes one) nor "
+                         f"config.json (a train.py run) to say which preset its encoders "
+                         f"were pretrained with: give --preset")
+    return preset or info["preset"]
 
 
 def batched(fn: Callable, x, chunk: int = 512):

@@ -226,6 +226,9 @@ def run_latent_vs_distance(task: str, ckpt: str, out: str, n: int = 500, seed: i
     import envs_mjx
 
     cfg, pre, seg = load_checkpoint(ckpt, task, preset)
+    if pre.object_vae is None:
+        raise ValueError(f"{ckpt}: Figure 5 needs encoders with an object-VAE (ROLL's); this "
+                         f"{cfg.algo} checkpoint has none")
     env = envs_mjx.make(task)
     obs_set = observation_set(env, jax.random.PRNGKey(seed), n)
     obs, goal, dist, pos = obs_set.rgb, obs_set.goal_rgb, obs_set.distances, obs_set.states

@@ -27,6 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from configs.encoders import HURDLE_TASKS, OCCLUSION_DROP  # noqa: F401 (occlusion.HURDLE_TASKS)
 from roll_jax.analysis.checkpoints import batched, encode_frames, load_checkpoint
 from roll_jax.analysis.stats import paired_difference, rounded_list
 from roll_jax.encoders import steps
@@ -36,12 +37,12 @@ from roll_jax.segmentation import pipeline
 # Appendix A, Fig. S1(a): estimation error of the occluded puck position (cm).
 PAPER_ERROR_CM = {"lstm_matching": 1.0, "lstm": 2.2, "vae": 3.1}
 OCCLUSION_MODELS = ("lstm_matching", "lstm", "vae")
-OCCLUSION_DROP = 0.85  # Appendix A: "removing 85% of the pixels"
+# OCCLUSION_DROP (Appendix A: "removing 85% of the pixels") and HURDLE_TASKS live in configs/,
+# which the command's parser reads without importing JAX.
 # LSTM training steps at which the occlusion command also scores the three models (below
 # the run's own length, which is scored too): the auto-encoder LSTM's retrieval changes with
 # how far it has learned to copy its input (docs/analysis.md).
 CURVE_STEPS = (0, 100, 200, 500, 1000, 2000, 5000)
-HURDLE_TASKS = ("hurdle_bottom", "hurdle_top")  # with a path around a wall (scenes.hurdle_path)
 HAND_BEHIND = 0.057  # puck radius 0.04 + claw radius 0.015 + 2 mm: the hand touching the puck
 
 

@@ -20,20 +20,18 @@ import functools
 import json
 import os
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
-from roll_jax.analysis import evaluation
-from roll_jax.analysis.checkpoints import batched
 from roll_jax.analysis.stats import spearman
-from roll_jax.encoders.goal_encoding import goal_encoder
-from roll_jax.training.plots import pyplot
+
+# JAX and the encoders are imported where they are used: `--help` answers without them.
 
 
 def placement_pairs(env, key, n: int):
     """(rgb_a, rgb_b [n, 48, 48, 3], object distances [n], hand distances [n]) of n pairs of
     independent random placements."""
+    import jax
+    import jax.numpy as jnp
 
     @jax.jit
     def run(keys):
@@ -50,6 +48,10 @@ def placement_pairs(env, key, n: int):
 
 def reward_latents(loaded, seed_index: int = 0):
     """images [B, 48, 48, 3] -> the run's reward latents [B, g] (seed `seed_index`)."""
+    import jax
+
+    from roll_jax.encoders.goal_encoding import goal_encoder
+
     cfg = loaded.cfg
     enc = goal_encoder(cfg)
     if not enc.from_pixels:
@@ -64,6 +66,8 @@ def reward_latents(loaded, seed_index: int = 0):
 
 
 def correlations(encode, pairs) -> dict:
+    from roll_jax.analysis.checkpoints import batched
+
     rgb_a, rgb_b, d_obj, d_hand = pairs
     za, zb = batched(encode, rgb_a, 256), batched(encode, rgb_b, 256)
     d_z = np.linalg.norm(np.asarray(za, np.float64) - np.asarray(zb, np.float64), axis=-1)
@@ -72,6 +76,8 @@ def correlations(encode, pairs) -> dict:
 
 
 def plot(results: list[dict], pairs, path: str, x_scale: float, x_unit: str) -> None:
+    from roll_jax.training.plots import pyplot
+
     plt = pyplot()
     _, _, d_obj, d_hand = pairs
     fig, axes = plt.subplots(len(results), 2, figsize=(7, 2.8 * len(results)), squeeze=False)
@@ -92,13 +98,19 @@ def plot(results: list[dict], pairs, path: str, x_scale: float, x_unit: str) -> 
 def main(argv=None) -> dict:
     p = argparse.ArgumentParser(prog="roll-analysis reward-probe", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--run", nargs="+", required=True, help="train.py --out directories")
+    p.add_argument("--run", nargs="+", required=True, metavar="RUN",
+                   help="train.py --out directories (of one task; only read)")
     p.add_argument("--n", type=int, default=500, help="placement pairs (default 500)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--out", required=True)
+    p.add_argument("--seed", type=int, default=0,
+                   help="PRNG seed of the placements (default 0)")
+    p.add_argument("--out", required=True, metavar="OUT",
+                   help="output directory: reward_probe.json, reward_probe.png")
     a = p.parse_args(argv)
     if a.n < 3:
         p.error(f"--n must be at least 3 (a rank correlation), got {a.n}")
+    import jax
+
+    from roll_jax.analysis import evaluation
     results, task, pairs = [], None, None
     try:
         for run in a.run:

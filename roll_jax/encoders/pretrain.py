@@ -2,7 +2,7 @@
 appendix "Training schedules").
 
     python -m roll_jax.encoders.pretrain --task TASK [--preset smoke|cpu|paper] --out DIR [--seg DIR]
-        [--set object_vae.occlusion_shape=edge ...]
+        [--set object_vae.occlusion_shape=edge ...]        (roll-pretrain; encoders/cli.py)
 
 - scene data: `n_pretrain_images` frames of a random policy (whole episodes from resets), or
   of states set to random goals (TrainConfig.scene_pretrain_data, per task);
@@ -18,7 +18,13 @@ appendix "Training schedules").
 
 from __future__ import annotations
 
-import argparse
+if __name__ == "__main__":  # the command parses its arguments before JAX loads (encoders/cli.py)
+    import sys
+
+    from roll_jax.encoders.cli import main
+
+    sys.exit(main())
+
 import dataclasses
 import functools
 import hashlib
@@ -392,49 +398,38 @@ def load(path: str, cfg: TrainConfig) -> Pretrained:
         return ck.restore(os.path.join(path, "encoders"), _abstract(cfg))
 
 
-def main(argv=None):
-    from configs.train import PRESETS, TASKS, build_config
+def main(argv=None) -> int:
+    """`roll-pretrain` (roll_jax/encoders/cli.py, which parses before importing JAX)."""
+    from roll_jax.encoders import cli
 
-    p = argparse.ArgumentParser(prog="roll-pretrain", description=__doc__,
-                                formatter_class=argparse.RawTextHelpFormatter)
-    p.add_argument("--task", required=True)
-    p.add_argument("--preset", default="paper",
-                   help=f"one of {', '.join(PRESETS)} (configs/presets.py)")
-    p.add_argument("--algo", default="roll")
-    p.add_argument("--out", required=True)
-    p.add_argument("--seg", default=None, help="segmentation checkpoint dir (fitted if absent)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE",
-                   help="config overrides as train.py's, e.g. object_vae.occlusion_shape=edge")
-    a = p.parse_args(argv)
-    if a.task not in TASKS:
-        p.error(f"unknown --task {a.task!r}; expected one of {', '.join(TASKS)}")
-    if a.preset not in PRESETS:
-        p.error(f"unknown --preset {a.preset!r}; expected one of {', '.join(PRESETS)}")
-    try:
-        cfg = build_config(a.task, a.algo, a.preset, overrides=a.set)
-    except ValueError as e:
-        sys.exit(f"error: {e}")
+    return cli.main(argv)
+
+
+def pretrain_command(cfg: TrainConfig, out: str, seg_dir: str | None, seed: int,
+                     overrides: list[str]) -> dict:
+    """What `roll-pretrain` does with a checked config: segmentation (fitted or loaded),
+    pretraining, DIR/encoders, the reconstruction grids and DIR/pretrain.json."""
     import envs_mjx
 
-    env = envs_mjx.make(a.task)
-    key = jax.random.PRNGKey(a.seed)
+    env = envs_mjx.make(cfg.task)
+    key = jax.random.PRNGKey(seed)
     seg = None
     if goal_encoder(cfg).segment:
-        seg = fit_or_load_segmentation(cfg, env, a.seg or os.path.join(a.out, "segmentation"),
+        seg = fit_or_load_segmentation(cfg, env, seg_dir or os.path.join(out, "segmentation"),
                                        jax.random.fold_in(key, 1))
     pre, info = pretrain(cfg, env, seg, key)
-    save(os.path.join(a.out, "encoders"), cfg, pre)
+    save(os.path.join(out, "encoders"), cfg, pre)
     recon_grid(pre.scene_vae.params, cfg.scene, info["scene_data"],
-               os.path.join(a.out, "recon_scene.png"))
+               os.path.join(out, "recon_scene.png"))
     if pre.object_vae is not None:
         recon_grid(pre.object_vae.params, cfg.object_vae, info["object_data"],
-                   os.path.join(a.out, "recon_object.png"))
+                   os.path.join(out, "recon_object.png"))
     summary = {k: [v[0], v[-1]] for k, v in info.items() if k.endswith("_loss")}
-    with open(os.path.join(a.out, "pretrain.json"), "w") as f:
-        json.dump({"task": a.task, "preset": a.preset, "overrides": list(a.set),
-                   "loss_first_last": summary}, f, indent=2)
+    with open(os.path.join(out, "pretrain.json"), "w") as f:
+        json.dump({"task": cfg.task, "preset": cfg.preset, "algo": cfg.algo,
+                   "overrides": list(overrides), "loss_first_last": summary}, f, indent=2)
     print(json.dumps(summary, indent=2))
+    return summary
 
 
 def fit_or_load_segmentation(cfg: TrainConfig, env, path: str, key):
@@ -447,5 +442,3 @@ def fit_or_load_segmentation(cfg: TrainConfig, env, path: str, key):
     return params
 
 
-if __name__ == "__main__":
-    main()
