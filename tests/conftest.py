@@ -39,8 +39,9 @@ jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
 # The longest files run first, the slowest two one per worker: `pytest -n 2 --dist loadfile
 # --no-loadscope-reorder` (make test) hands a worker its next file when it is nearly done,
 # so the short files come last and even out the two workers' finishing times.
-_SLOW_FIRST = ("test_train.py", "test_sharding.py", "test_segmentation_pipeline.py",
-               "test_envs.py", "test_oracle.py", "test_losses.py", "test_skewfit_ablations.py",
+_SLOW_FIRST = ("test_train.py", "test_sharding.py", "test_multihost.py",
+               "test_segmentation_pipeline.py", "test_run_logging.py", "test_envs.py",
+               "test_oracle.py", "test_losses.py", "test_skewfit_ablations.py",
                "test_analysis.py", "test_gpu_check.py", "test_envs_render.py")
 
 
