@@ -41,3 +41,28 @@ def test_final_policy_difference_is_per_episode():
     assert out["mean_a_minus_b_cm"] == pytest.approx(d.mean())
     assert out["standard_error_cm"] == pytest.approx(d.std(ddof=1) / np.sqrt(6))
     assert out["median_a_minus_b_cm"] == pytest.approx(-1.0)
+
+
+def test_compare_command_pairs_two_run_directories_and_plots_them(tmp_path, capsys):
+    import json
+
+    from configs.train import build_config
+    from roll_jax.training import run_dir
+
+    cfg = build_config("puck_push", "roll", "smoke", seeds=2)
+    runs = []
+    for name, shift in (("a", -0.01), ("b", 0.01)):
+        d = tmp_path / name
+        d.mkdir()
+        run_dir.write_config(str(d), cfg)
+        run_dir.append_rows(str(d / "metrics.csv"), [
+            {"env_steps": 500 * i, "seed": s, "final_distance": 0.1 - 0.01 * i + shift,
+             "start_distance": 0.1} for i in range(3) for s in range(2)])
+        (d / run_dir.COMPLETE_MARKER).write_text("{}")
+        runs.append(str(d))
+    out, png = tmp_path / "cmp.json", tmp_path / "fig" / "cmp.png"
+    assert compare.main([*runs, "--out", str(out), "--plot", str(png)]) == 0
+    assert png.stat().st_size > 0 and f"wrote {png}" in capsys.readouterr().out
+    res = json.loads(out.read_text())
+    assert res["evaluations_a_below_b"] == 3
+    assert res["paired_diff_mean"] == pytest.approx(-0.02)

@@ -1,7 +1,7 @@
 """Comparing training runs: paired learning curves, paired final policies, the policy panel.
 
     roll-analysis compare RUN_A RUN_B [--from-steps N] [--to-steps N] [--partial]
-        [--n-goals N [--seed S]] [--out FILE.json]
+        [--n-goals N [--seed S]] [--out FILE.json] [--plot PNG]       (roll-compare ...)
     roll-analysis policy-panel --evals OUT_A OUT_B --labels ROLL Skew-Fit [--goals 0 1 2 3]
         --out PNG
 
@@ -14,6 +14,7 @@ and the correlation of A's and B's per-seed distances (how much of a curve's jit
 goals' rather than the policies'). A run evaluates on few goals (16 per seed at the cpu
 preset); `--n-goals N` also evaluates both runs' last checkpoints on N more goals per seed,
 the same goals from the same starts for both (`--seed`), and pairs them episode by episode.
+`--plot PNG` draws both learning curves (median over seeds, 25-75% band) on one figure.
 
 `policy-panel` draws the paper's policy visualisation from `roll-evaluate` outputs of one
 task made with the same --seed: per goal, the goal image and each run's final frame (seed 0)
@@ -116,6 +117,8 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=7,
                    help="PRNG seed of those goals and starts (default 7; not a run's seed)")
     p.add_argument("--out", default=None, metavar="FILE", help="write the figures as JSON")
+    p.add_argument("--plot", default=None, metavar="PNG",
+                   help="draw both learning curves (median over seeds, 25-75%% band) there")
     a = p.parse_args(argv)
     runs, complete = [], []
     try:
@@ -155,6 +158,15 @@ def main(argv=None) -> int:
         with open(a.out, "w") as f:
             json.dump(out, f, indent=2)
         print(f"wrote {a.out}")
+    if a.plot:
+        os.makedirs(os.path.dirname(os.path.abspath(a.plot)), exist_ok=True)
+        last = out["env_steps"][-1]
+        plots.compare_curves(
+            [(f"{name}: {os.path.basename(os.path.normpath(d))}",
+              [r for r in rows if r["env_steps"] <= last])
+             for name, d, rows in (("A", a.runs[0], rows_a), ("B", a.runs[1], rows_b))],
+            a.plot, f"{ca.task}, {ca.seeds} seeds")
+        print(f"wrote {a.plot}")
     return 0
 
 

@@ -81,8 +81,11 @@ def _short(e: BaseException) -> str:
     """One line of an orbax / TensorStore error: its cause (the read that failed), without the
     TensorStore spec it prints."""
     cause = e.__cause__ or e.__context__
-    text = str(cause if cause is not None and str(cause) else e) or type(e).__name__
-    return text.split("See full TensorStore details")[0].strip().splitlines()[0][:300]
+    err = cause if cause is not None and str(cause) else e
+    text = str(err).split("See full TensorStore details")[0].strip()
+    text = text.splitlines()[0][:300] if text else ""
+    # A bare key or number (a KeyError's) says nothing without its type.
+    return text if " " in text else f"{type(err).__name__} {text}".strip()
 
 
 _UNRAISABLE_FILTERED = False
@@ -92,7 +95,8 @@ def _quiet_failed_reads() -> None:
     """A failed restore leaves orbax's other array reads pending; when they finish after its
     event loop closed, Python prints each one's traceback ("RuntimeError: Event loop is
     closed", "Encountered error while reading array index"), hundreds of lines that say no
-    more than the error already reported. Those, and only those, are dropped from here on."""
+    more than the error already reported. Those, and only those, are dropped from the first
+    restore on (installed once per process)."""
     global _UNRAISABLE_FILTERED
     import sys
 
@@ -146,10 +150,10 @@ def restore_train_state(mgr, abstract, on_damaged=None):
                     f"the train state in {mgr.directory}/{step} does not fit this version's "
                     f"TrainState ({mismatch}); it was written by another version of roll_jax "
                     f"(read it with that version)")
+            _quiet_failed_reads()  # before: the reads left behind report while it unwinds
             try:
                 saved = mgr.restore(step, args=ocp.args.StandardRestore(target))
             except Exception as e:  # noqa: BLE001 (any read error: the step is damaged)
-                _quiet_failed_reads()
                 reason = _short(e)
             else:
                 return step, _unsaveable(abstract, saved)

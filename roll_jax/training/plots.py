@@ -52,6 +52,24 @@ def learning_curve(rows: list[dict], path: str, title: str) -> None:
     plt.close(fig)
 
 
+def compare_curves(runs: list[tuple[str, list[dict]]], path: str, title: str) -> None:
+    """Runs' learning curves on one plot: each run's median over seeds with its 25-75% band
+    (`roll-compare --plot`), the test goals' distance at their start dashed."""
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(5, 3.4))
+    for label, rows in runs:
+        plot_median_band(ax, rows, label)
+    starts = [r["start_distance"] for _, rows in runs for r in rows if "start_distance" in r]
+    if starts:
+        ax.axhline(float(np.median(starts)), color="grey", ls="--", lw=1,
+                   label="test goals at their start")
+    ax.set_title(title)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
 def policy_panel(evaluations: list[dict], labels: list[str], goals: list[int], path: str) -> None:
     """The paper's policy visualisation: per goal (a row), the goal image, then each
     evaluation's final frame (seed 0) with its final distance. `evaluations`: dicts with

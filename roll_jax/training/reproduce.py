@@ -489,7 +489,15 @@ def main(argv=None, run_fn=None, pool=None) -> int:
         return 0
     os.makedirs(a.out, exist_ok=True)
     if not a.report_only:
-        run_grid(cells, a, run_fn, pool)
+        from roll_jax.common.checkpoint import DamagedCheckpoint
+        from roll_jax.training import events, run_dir
+
+        try:
+            run_grid(cells, a, run_fn, pool)
+        except (run_dir.RunLocked, events.EventDirNotWritable, DamagedCheckpoint) as e:
+            # a cell another process trains, or that cannot go on (finished cells stay)
+            print(f"error: {e}", file=sys.stderr, flush=True)
+            return 1
     entries = report(cells, a.out, a.ablations)
     print(json.dumps({"out": a.out, "results": entries}, indent=2))
     return 0
