@@ -280,8 +280,14 @@ def test_metrics_csv_appends_under_one_header_and_drops_a_torn_row(tmp_path):
     assert run_dir.read_rows(path, 2**62) == rows
     assert run_dir.restart_rows(path, 200) == rows[:4]  # resumed from 200 env steps
     assert _steps(_csv(path)) == [(0, 0), (0, 1), (100, 0), (100, 1)]
-    with pytest.raises(ValueError, match="has the columns"):
-        run_dir.append_rows(path, [{"env_steps": 200, "seed": 0, "other": 1.0}])
+    # A row with a column the file lacks (a resume by a version that logs more): the file
+    # takes it, the earlier rows read "nan" there, nothing is dropped.
+    run_dir.append_rows(path, [{"env_steps": 200, "seed": 0, "final_distance": 0.3,
+                                "q_loss": 2.0, "other": 1.0}])
+    table = _csv(path)
+    assert list(table[0]) == ["env_steps", "seed", "final_distance", "q_loss", "other"]
+    assert [r["other"] for r in table] == ["nan"] * 4 + ["1.0"]
+    assert open(path).read().count("env_steps") == 1
     assert run_dir.restart_rows(path, None) == [] and not os.path.exists(path)  # a new run
 
 

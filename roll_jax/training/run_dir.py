@@ -121,17 +121,23 @@ def write_rows(csv_path: str, rows: list[dict]) -> None:
         if os.path.exists(csv_path):
             os.remove(csv_path)
         return
+    _write_csv(csv_path, rows, list(rows[0]))
+
+
+def _write_csv(csv_path: str, rows: list[dict], columns: list[str]) -> None:
+    """The file replaced atomically by `rows` under `columns` ("nan" where one is missing)."""
     tmp = f"{csv_path}.tmp{os.getpid()}"
     with open(tmp, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w = csv.DictWriter(f, fieldnames=columns, restval="nan")
         w.writeheader()
         w.writerows(rows)
     os.replace(tmp, csv_path)
 
 
 def append_rows(csv_path: str, rows: list[dict]) -> None:
-    """Rows appended to metrics.csv (the header first when the file is new or empty). The
-    columns are the file's; a row with others is a ValueError (nothing written)."""
+    """Rows appended to metrics.csv (the header first when the file is new or empty). Rows
+    with columns the file lacks (a run resumed by a version that logs more) rewrite it once
+    with every column, "nan" where a row has no value."""
     if not rows:
         return
     new = not os.path.exists(csv_path) or os.path.getsize(csv_path) == 0
@@ -139,12 +145,14 @@ def append_rows(csv_path: str, rows: list[dict]) -> None:
     if not new:
         with open(csv_path, newline="") as f:
             columns = next(csv.reader(f), None) or columns
-    for r in rows:
-        if list(r) != columns:
-            raise ValueError(f"{csv_path} has the columns {columns}, a row to append has "
-                             f"{list(r)}")
+    wanted = columns + [k for r in rows for k in r if k not in columns]
+    wanted = list(dict.fromkeys(wanted))
+    if not new and wanted != columns:
+        with open(csv_path, newline="") as f:
+            old = list(csv.DictReader(f))
+        _write_csv(csv_path, old, wanted)
     with open(csv_path, "a", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=columns)
+        w = csv.DictWriter(f, fieldnames=wanted, restval="nan")
         if new:
             w.writeheader()
         w.writerows(rows)
