@@ -7,8 +7,10 @@
     driver     segmentation -> pretraining -> chunks; logs, checkpoints, plots (`run`)
     cli        the training command (train.py, roll-train)
     reproduce  the paper's grid of runs, its figures and table (roll-reproduce)
-    run_dir    the files of a run directory; plots: learning curves
-    sharding   seeds over devices; compiler: the compilation cache, the chunk's options
+    run_dir    the files of a run directory, its lock; plots: learning curves
+    events     the run's TensorBoard event files (DIR/tb): write, trim on resume, read
+    sharding   seeds over devices and processes; compiler: the compilation cache, the
+               chunk's options
 """
 
 from roll_jax.common.lazy import lazy_api
@@ -18,4 +20,5 @@ __all__, __getattr__, __dir__ = lazy_api(__name__, {
     ".state": ("TrainState", "ChunkPlan", "plan_chunk", "init_state"),
     ".driver": ("run", "setup", "init_seeds"),
     ".run_dir": ("read_config", "read_rows", "is_complete"),
+    ".events": ("read_scalars",),
 })
