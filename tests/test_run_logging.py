@@ -174,6 +174,7 @@ def test_only_damaged_checkpoints_are_refused_in_one_message(runs, tmp_path):
     assert len(err.splitlines()) < 12, err  # no storm
     assert sorted(os.listdir(os.path.join(run, "ckpt"))) == ["2", "4"]  # left in place
     assert open(os.path.join(run, "metrics.csv")).read() == before
+    assert os.path.exists(os.path.join(run, run_dir.COMPLETE_MARKER))
     assert not os.path.exists(os.path.join(run, run_dir.LOCK))
 
 

@@ -243,9 +243,6 @@ def _run(cfg: TrainConfig, out: str, resume: bool, seg_ckpt, enc_ckpt, seed: int
     if main:
         os.makedirs(os.path.join(out, "plots"), exist_ok=True)
         os.makedirs(os.path.join(out, "videos"), exist_ok=True)
-        marker = os.path.join(out, COMPLETE_MARKER)
-        if os.path.exists(marker):  # being redone or continued: not complete until the end
-            os.remove(marker)
         run_dir.write_config(out, cfg)
         run_dir.write_inputs(out, seg_ckpt, enc_ckpt, seed)
 
@@ -275,6 +272,9 @@ def _run(cfg: TrainConfig, out: str, resume: bool, seg_ckpt, enc_ckpt, seed: int
     keep = start_epoch * cfg.epoch_env_steps if resume else None
     final = start_epoch == cfg.n_epochs
     if main:
+        marker = os.path.join(out, COMPLETE_MARKER)
+        if os.path.exists(marker):  # being redone or continued: not complete until the end
+            os.remove(marker)
         rows = run_dir.restart_rows(csv_path, keep, final)
         log = events.EventLog(out, keep, final)
         if keep is None:
