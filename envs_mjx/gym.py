@@ -96,6 +96,20 @@ def _info_objects(info, key):
     return np.stack([np.asarray(i[key], np.float32) for i in info])
 
 
+
+def _checked_actions(env, actions, what: str) -> np.ndarray:
+    """float32 actions of `env`'s action space; ResetNeeded before the first reset, and a
+    ValueError naming the task for a wrong shape or a non-finite value."""
+    if env._state is None:
+        raise gymnasium.error.ResetNeeded("call reset() before step()")
+    a = np.asarray(actions, np.float32)
+    if a.shape != env.action_space.shape:
+        raise ValueError(f"{what} for {env.task!r} must have shape {env.action_space.shape}, "
+                         f"got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{what} for {env.task!r} is not finite: {a}")
+    return a
+
 class _GoalReward:
     """`compute_reward` shared by the single and the vector env."""
 
@@ -163,14 +177,7 @@ class RollGoalEnv(_GoalReward, gymnasium.Env):
         return self._observe()
 
     def step(self, action):
-        if self._state is None:
-            raise gymnasium.error.ResetNeeded("call reset() before step()")
-        a = np.asarray(action, np.float32)
-        if a.shape != self.action_space.shape:
-            raise ValueError(f"action for {self.task!r} must have shape "
-                             f"{self.action_space.shape}, got {a.shape}")
-        if not np.all(np.isfinite(a)):
-            raise ValueError(f"action for {self.task!r} is not finite: {a}")
+        a = _checked_actions(self, action, "action")
         self._state = self._env.jit_step(self._state, a)
         ob, info = self._observe()
         reward, done = jax.device_get((self._state.reward, self._state.done))
@@ -261,14 +268,7 @@ class RollGoalVectorEnv(_GoalReward, VectorEnv):
         return self._observe()
 
     def step(self, actions):
-        if self._state is None:
-            raise gymnasium.error.ResetNeeded("call reset() before step()")
-        a = np.asarray(actions, np.float32)
-        if a.shape != self.action_space.shape:
-            raise ValueError(f"actions for {self.task!r} must have shape "
-                             f"{self.action_space.shape}, got {a.shape}")
-        if not np.all(np.isfinite(a)):
-            raise ValueError(f"actions for {self.task!r} are not finite")
+        a = _checked_actions(self, actions, "actions")
         mask = self._autoreset
         if not mask.any():
             self._state = self._env.jit_vstep(self._state, a)
