@@ -36,7 +36,7 @@ def built(monkeypatch):
         counts["scene_data"] += 1
         return jax.random.randint(key, (n, 48, 48, 3), 0, 256).astype(jnp.uint8)
 
-    def object_dataset(env, seg, key, n, goal_share=0.0, arm_pairs=False):
+    def object_dataset(env, seg, key, n, goal_share=0.0, arm_pairs=False, hand="random"):
         counts["object_data"] += 1
         out = ()
         for k in [key, jax.random.fold_in(key, 1)][:1 + arm_pairs]:  # images (and partners)
@@ -110,7 +110,7 @@ def test_scene_data_from_goals_are_rendered_goal_states():
     np.testing.assert_array_equal(data, want)
     assert data.shape == (4, 48, 48, 3) and data.dtype == jnp.uint8
     assert len({np.asarray(x).tobytes() for x in data}) == 4  # four different goal states
-    with pytest.raises(ValueError, match="'random_policy' or 'goals', got 'expert'"):
+    with pytest.raises(ValueError, match="'random_policy', 'goals' or 'region', got 'expert'"):
         pretrain.scene_dataset(env, key, 4, "expert")
 
 

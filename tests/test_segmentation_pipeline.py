@@ -105,7 +105,7 @@ def test_segment_is_jittable_and_batched(fitted):
     # (`evaluate`) above, 6 and 4 here, all one program for the env.
     rgb4, _ = pipeline.random_object_states(env, jax.random.PRNGKey(2), 4)
     np.testing.assert_array_equal(rgb4, rgb[:4])  # state i depends on the key and i only
-    assert pipeline._object_states_fn(env, 5, False)._cache_size() == 1
+    assert pipeline._object_states_fn(env, 5, False, "random")._cache_size() == 1
 
 
 def test_segment_rejects_bad_images(fitted):

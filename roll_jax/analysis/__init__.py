@@ -14,7 +14,8 @@ comparisons of runs (`roll-analysis CMD`, `roll-evaluate`).
 from roll_jax.common.lazy import lazy_api
 
 __all__, __getattr__, __dir__ = lazy_api(__name__, {
-    ".evaluation": ("load_run", "evaluate", "write_outputs"),
+    # (the evaluation function is `evaluation.evaluate`: `evaluate` names the command's module)
+    ".evaluation": ("load_run", "write_outputs"),
     ".stats": ("spearman", "pearson", "position_r2", "pairwise_spearman"),
     ".checkpoints": ("load_checkpoint", "model_encoders"),
     ".fig5": ("observation_set", "latent_vs_distance", "run_latent_vs_distance"),
