@@ -97,6 +97,25 @@ def _info_objects(info, key):
 
 
 
+def _rgb_frames(env):
+    """The camera image(s) of a Gymnasium env's state ([H, W, 3], or [N, H, W, 3] for the
+    vector env), or None (with Gymnasium's warning) without a render mode."""
+    if env.render_mode is None:
+        gymnasium.logger.warn("render() called without a render_mode; make the env with "
+                              "render_mode='rgb_array'")
+        return None
+    if env._state is None:
+        raise gymnasium.error.ResetNeeded("call reset() before render()")
+    if env.obs_type == "pixels":
+        return np.array(jax.device_get(env._state.obs[..., :3]))
+    s = env._env.image_size
+    fn = _render_fn(env._env.base, s, s)
+    d = env._state.data
+    if d.geom_xpos.ndim == 2:  # one env
+        return np.array(fn(d.geom_xpos, d.geom_xmat))
+    return np.stack([np.asarray(fn(x, m)) for x, m in zip(d.geom_xpos, d.geom_xmat)])
+
+
 def _checked_actions(env, actions, what: str) -> np.ndarray:
     """float32 actions of `env`'s action space; ResetNeeded before the first reset, and a
     ValueError naming the task for a wrong shape or a non-finite value."""
@@ -185,17 +204,7 @@ class RollGoalEnv(_GoalReward, gymnasium.Env):
         return ob, float(reward), False, bool(done), info
 
     def render(self):
-        if self.render_mode is None:
-            gymnasium.logger.warn("render() called without a render_mode; make the env with "
-                                  "render_mode='rgb_array'")
-            return None
-        if self._state is None:
-            raise gymnasium.error.ResetNeeded("call reset() before render()")
-        if self.obs_type == "pixels":
-            return np.array(jax.device_get(self._state.obs[..., :3]))
-        s = self._env.image_size
-        fn = _render_fn(self._env.base, s, s)
-        return np.array(fn(self._state.data.geom_xpos, self._state.data.geom_xmat))
+        return _rgb_frames(self)
 
 
 class RollGoalVectorEnv(_GoalReward, VectorEnv):
@@ -286,21 +295,8 @@ class RollGoalVectorEnv(_GoalReward, VectorEnv):
         return ob, np.asarray(reward, np.float32), terminated, truncated, info
 
     def render(self):
-        if self.render_mode is None:
-            gymnasium.logger.warn("render() called without a render_mode; make the env with "
-                                  "render_mode='rgb_array'")
-            return None
-        if self._state is None:
-            raise gymnasium.error.ResetNeeded("call reset() before render()")
-        if self.obs_type == "pixels":
-            frames = np.array(jax.device_get(self._state.obs[..., :3]))
-        else:
-            s = self._env.image_size
-            fn = _render_fn(self._env.base, s, s)
-            d = self._state.data
-            frames = np.stack([np.asarray(fn(d.geom_xpos[i], d.geom_xmat[i]))
-                               for i in range(self.num_envs)])
-        return tuple(frames)
+        frames = _rgb_frames(self)
+        return None if frames is None else tuple(frames)
 
 
 @jax.jit
