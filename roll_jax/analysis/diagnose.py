@@ -94,9 +94,7 @@ def _render_fn(env):
 
 
 def _hand_away(env) -> np.ndarray:
-    # The reference's object-only images move the hand to (-0.2, 0.2): out of this camera's view.
-    away = getattr(env.spec, "hand_away", None) or (-0.2, 0.2, env.spec.hand_low[2])
-    return np.asarray(away, np.float32)
+    return np.asarray(env.spec.hand_away, np.float32)
 
 
 def _goal_hand(env) -> np.ndarray:
@@ -223,7 +221,7 @@ def prior_goal_positions(env, cfg, pre, seg, key, n: int = 256) -> tuple[dict, n
     nearest = grid[shown][np.argmin(d, axis=1)]
     empty = mass < 0.25 * np.median(ref_mass[shown])
     in_region = np.zeros(n, bool)
-    for lo, hi in _region(env):
+    for lo, hi in env.spec.region:
         in_region |= np.all((nearest >= np.asarray(lo) - 0.01) & (nearest <= np.asarray(hi) + 0.01), 1)
     goal_lo, goal_hi = np.asarray(env.spec.object_goal_low), np.asarray(env.spec.object_goal_high)
     in_goal = np.all((nearest >= goal_lo - 0.01) & (nearest <= goal_hi + 0.01), 1)
@@ -236,12 +234,6 @@ def prior_goal_positions(env, cfg, pre, seg, key, n: int = 256) -> tuple[dict, n
                "puck_xy_std": np.round(nearest[full].std(0), 4).tolist() if full.any() else None,
                "puck_xy": np.round(nearest, 3).tolist()}
     return summary, decoded
-
-
-def _region(env):
-    spec = env.spec
-    region = getattr(spec, "region", None)
-    return region if region is not None else ((spec.object_goal_low, spec.object_goal_high),)
 
 
 def write_prior_png(decoded, path: str, n: int = 32) -> None:
