@@ -68,7 +68,8 @@ def arclength(path: np.ndarray, points) -> np.ndarray:
 
 
 def path_points(path: np.ndarray, step: float) -> np.ndarray:
-    """Points every `step` along the polyline (both ends included)."""
+    """Points about every `step` along the polyline (each segment cut in equal parts of
+    about `step`; both ends included)."""
     out = []
     for a, b in zip(path[:-1], path[1:]):
         n = max(int(round(np.linalg.norm(b - a) / step)), 1)
