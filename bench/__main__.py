@@ -17,6 +17,7 @@ BENCHMARKS = {
     "chunk": "the compiled training chunk's env steps/s and its parts",
     "learning": "a training run of the real loop and its learning curve",
     "grid": "the smoke reproduction grid's wall time and where it goes",
+    "brax_sac": "Brax's own SAC trainer on puck_push from state observations: curve, wall time",
     "gpu_check": "what a lent GPU runs: rendered env steps/s at 1024 and 4096 envs, a "
                  "paper-preset chunk and its compile",
 }

@@ -244,7 +244,8 @@ class RollEnv(_Base):
         dist = self.goal_distance(self.achieved_goal(start.data), goal)
         return State(data=start.data, obs=self._obs(start.data, info),
                      reward=jnp.zeros((), jnp.float32), done=jnp.zeros((), jnp.float32),
-                     metrics={"goal_distance": dist}, info=info)
+                     metrics={"goal_distance": dist,
+                              "final_goal_distance": jnp.zeros((), jnp.float32)}, info=info)
 
     def step(self, state: State, action: jax.Array) -> State:
         """One control step (0.1 s: the mocap moves by 0.02 * clip(action, -1, 1), then 10
@@ -261,7 +262,10 @@ class RollEnv(_Base):
         else:
             done = jnp.zeros((), jnp.float32)
             info["truncation"] = jnp.zeros((), jnp.float32)
-        metrics = {**state.metrics, "goal_distance": dist}
+        # the distance at the episode's last step, 0 before: its sum over an episode (what
+        # Brax's evaluator reports) is the paper's final distance
+        final = jnp.where(t == self.episode_length, dist, 0.0).astype(jnp.float32)
+        metrics = {**state.metrics, "goal_distance": dist, "final_goal_distance": final}
         return state.replace(data=nxt.data, obs=self._obs(nxt.data, info),
                              reward=-dist.astype(jnp.float32), done=done, metrics=metrics,
                              info=info)

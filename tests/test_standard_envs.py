@@ -82,7 +82,7 @@ def test_sizes_and_playground_properties():
 def test_reset_draws_a_goal_and_fills_every_field(env, episode):
     s = episode[0]
     assert set(s.info) == {"goal", "goal_image", "t", "truncation"}
-    assert set(s.metrics) == {"goal_distance"}
+    assert set(s.metrics) == {"goal_distance", "final_goal_distance"}
     assert s.obs.shape == (48, 48, 6) and s.obs.dtype == jnp.uint8
     assert float(s.reward) == 0.0 and float(s.done) == 0.0 and int(s.info["t"]) == 0
     spec = env.base.spec
@@ -103,6 +103,9 @@ def test_reward_is_minus_the_goal_distance(env, episode):
         want = np.linalg.norm(obj - np.asarray(s.info["goal"]))
         assert float(s.reward) == pytest.approx(-want, abs=1e-6)
         assert float(s.metrics["goal_distance"]) == pytest.approx(want, abs=1e-6)
+        # final_goal_distance: the distance at the last step only (summed: the final distance)
+        last = int(s.info["t"]) == env.episode_length
+        assert float(s.metrics["final_goal_distance"]) == pytest.approx(want * last, abs=1e-6)
     assert float(episode[-1].info["t"]) == env.horizon
     # the goal stays the same through the episode
     np.testing.assert_array_equal(np.asarray(episode[0].info["goal"]),
