@@ -66,3 +66,37 @@ def test_compare_command_pairs_two_run_directories_and_plots_them(tmp_path, caps
     res = json.loads(out.read_text())
     assert res["evaluations_a_below_b"] == 3
     assert res["paired_diff_mean"] == pytest.approx(-0.02)
+
+
+def test_compare_pairs_every_further_run_with_the_first(tmp_path, capsys):
+    import json
+
+    from configs.train import build_config
+    from roll_jax.training import run_dir
+
+    cfg = build_config("puck_push", "roll", "smoke", seeds=2)
+    runs = []
+    for name, shift in (("a", 0.0), ("b", 0.01), ("c", -0.03)):
+        d = tmp_path / name
+        d.mkdir()
+        run_dir.write_config(str(d), cfg)
+        run_dir.append_rows(str(d / "metrics.csv"), [
+            {"env_steps": 500 * i, "seed": s, "final_distance": 0.1 - 0.01 * i + shift,
+             "start_distance": 0.1} for i in range(3) for s in range(2)])
+        (d / run_dir.COMPLETE_MARKER).write_text("{}")
+        runs.append(str(d))
+    out, png = tmp_path / "cmp.json", tmp_path / "cmp.png"
+    assert compare.main([*runs, "--labels", "A", "B", "C", "--out", str(out),
+                         "--plot", str(png)]) == 0
+    res = json.loads(out.read_text())
+    assert [(p["a"], p["b"]) for p in res["pairs"]] == [(runs[0], runs[1]), (runs[0], runs[2])]
+    assert res["pairs"][0]["paired_diff_mean"] == pytest.approx(-0.01)
+    assert res["pairs"][1]["paired_diff_mean"] == pytest.approx(0.03)
+    assert res["pairs"][1]["evaluations_a_below_b"] == 0
+    assert png.stat().st_size > 0
+    for bad, msg in (([runs[0]], "two or more runs"),
+                     ([*runs, "--labels", "A", "B"], "2 labels for 3 runs"),
+                     ([*runs, "--n-goals", "4"], "two runs' final policies")):
+        with pytest.raises(SystemExit):
+            compare.main(bad)
+        assert msg in capsys.readouterr().err

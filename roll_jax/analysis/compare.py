@@ -1,7 +1,8 @@
 """Comparing training runs: paired learning curves, paired final policies, the policy panel.
 
-    roll-analysis compare RUN_A RUN_B [--from-steps N] [--to-steps N] [--partial]
-        [--n-goals N [--seed S]] [--out FILE.json] [--plot PNG]       (roll-compare ...)
+    roll-analysis compare RUN_A RUN_B [RUN_C ...] [--from-steps N] [--to-steps N] [--partial]
+        [--n-goals N [--seed S]] [--labels ...] [--out FILE.json] [--plot PNG]
+                                                                        (roll-compare ...)
     roll-analysis policy-panel --evals OUT_A OUT_B --labels ROLL Skew-Fit [--goals 0 1 2 3]
         --out PNG
 
@@ -14,7 +15,9 @@ and the correlation of A's and B's per-seed distances (how much of a curve's jit
 goals' rather than the policies'). A run evaluates on few goals (16 per seed at the cpu
 preset); `--n-goals N` also evaluates both runs' last checkpoints on N more goals per seed,
 the same goals from the same starts for both (`--seed`), and pairs them episode by episode.
-`--plot PNG` draws both learning curves (median over seeds, 25-75% band) on one figure.
+With more than two runs, each of B, C, ... is paired with A (one entry per pair in the JSON's
+"pairs"). `--plot PNG` draws every run's learning curve (median over seeds, 25-75% band) on
+one figure.
 
 `policy-panel` draws the paper's policy visualisation from `roll-evaluate` outputs of one
 task made with the same --seed: per goal, the goal image and each run's final frame (seed 0)
@@ -102,24 +105,47 @@ def final_policies(runs: list[str], n_goals: int, seed: int) -> dict:
             "a_minus_b": difference(finals[0], finals[1])}
 
 
+def _print_pair(pair: dict, from_steps: int) -> None:
+    for s, x, y in zip(pair["env_steps"], pair["median_a"], pair["median_b"]):
+        print(f"env steps {s:7d}: A {x * 100:5.2f} cm  B {y * 100:5.2f} cm")
+    print(f"from {from_steps}: mean of medians A {pair['mean_median_a'] * 100:.2f} cm, "
+          f"B {pair['mean_median_b'] * 100:.2f} cm; A below B in "
+          f"{pair['evaluations_a_below_b']}/{pair['n_evaluations']}; paired A-B "
+          f"{pair['paired_diff_mean'] * 100:.2f} +- {pair['paired_diff_sem'] * 100:.2f} cm; "
+          f"corr {pair['corr_per_seed_eval']}")
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="roll-analysis compare", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("runs", nargs=2, metavar="RUN", help="two train.py --out directories, A B")
+    p.add_argument("runs", nargs="+", metavar="RUN",
+                   help="two or more train.py --out directories: A B [C ...]; every other "
+                        "run is paired with A")
     p.add_argument("--from-steps", type=int, default=0,
                    help="pair the evaluations from this env step on (default 0)")
     p.add_argument("--to-steps", type=int, default=None,
                    help="pair the evaluations up to this env step only")
     p.add_argument("--partial", action="store_true",
-                   help="accept an unfinished run; compare up to the last evaluation both have")
+                   help="accept an unfinished run; compare up to the last evaluation all have")
     p.add_argument("--n-goals", type=int, default=0,
-                   help="also evaluate both last checkpoints on N goals per seed (default 0)")
+                   help="also evaluate A's and B's last checkpoints on N goals per seed "
+                        "(two runs only; default 0)")
     p.add_argument("--seed", type=int, default=7,
                    help="PRNG seed of those goals and starts (default 7; not a run's seed)")
+    p.add_argument("--labels", nargs="+", default=None,
+                   help="one label per run for the plot (default: A, B, C, ... and the "
+                        "directory name)")
     p.add_argument("--out", default=None, metavar="FILE", help="write the figures as JSON")
     p.add_argument("--plot", default=None, metavar="PNG",
-                   help="draw both learning curves (median over seeds, 25-75%% band) there")
+                   help="draw every run's learning curve (median over seeds, 25-75%% band) "
+                        "there")
     a = p.parse_args(argv)
+    if len(a.runs) < 2:
+        p.error(f"compare needs two or more runs, got {len(a.runs)}: {a.runs}")
+    if a.labels is not None and len(a.labels) != len(a.runs):
+        p.error(f"--labels gives {len(a.labels)} labels for {len(a.runs)} runs")
+    if a.n_goals > 0 and len(a.runs) != 2:
+        p.error(f"--n-goals evaluates two runs' final policies; got {len(a.runs)} runs")
     runs, complete = [], []
     try:
         for d in a.runs:
@@ -129,25 +155,29 @@ def main(argv=None) -> int:
                                  "--partial compares what it has")
             runs.append((run_dir.read_config(d),
                          run_dir.read_rows(os.path.join(d, "metrics.csv"), 2**62, True)))
-        (ca, rows_a), (cb, rows_b) = runs
-        if (ca.task, ca.seeds) != (cb.task, cb.seeds):
-            raise ValueError(f"task/seeds differ: {ca.task}/{ca.seeds} vs {cb.task}/{cb.seeds}")
+        ca = runs[0][0]
+        for d, (c, _) in zip(a.runs[1:], runs[1:]):
+            if (c.task, c.seeds) != (ca.task, ca.seeds):
+                raise ValueError(f"task/seeds differ: {a.runs[0]} {ca.task}/{ca.seeds} vs "
+                                 f"{d} {c.task}/{c.seeds}")
         to_steps = a.to_steps
         if a.partial:
-            last = min(max(r["env_steps"] for r in rows) for rows in (rows_a, rows_b))
+            last = min(max(r["env_steps"] for r in rows) for _, rows in runs)
             to_steps = last if to_steps is None else min(to_steps, last)
-        out = {"a": a.runs[0], "b": a.runs[1], "task": ca.task, "seeds": ca.seeds,
-               "complete": complete, **compare(rows_a, rows_b, a.from_steps, to_steps)}
+        pairs = [{"a": a.runs[0], "b": d,
+                  **compare(runs[0][1], rows, a.from_steps, to_steps)}
+                 for d, (_, rows) in zip(a.runs[1:], runs[1:])]
+        # two runs: the pair's figures at the top level; more: one entry per pair with A
+        out = {"runs": a.runs, "task": ca.task, "seeds": ca.seeds, "complete": complete,
+               **(pairs[0] if len(pairs) == 1 else {"pairs": pairs})}
         if a.n_goals > 0:
             out["final_policies"] = final_policies(a.runs, a.n_goals, a.seed)
     except (FileNotFoundError, ValueError) as e:
         p.error(str(e))
-    for s, x, y in zip(out["env_steps"], out["median_a"], out["median_b"]):
-        print(f"env steps {s:7d}: A {x * 100:5.2f} cm  B {y * 100:5.2f} cm")
-    print(f"from {a.from_steps}: mean of medians A {out['mean_median_a'] * 100:.2f} cm, "
-          f"B {out['mean_median_b'] * 100:.2f} cm; A below B in {out['evaluations_a_below_b']}"
-          f"/{out['n_evaluations']}; paired A-B {out['paired_diff_mean'] * 100:.2f} +- "
-          f"{out['paired_diff_sem'] * 100:.2f} cm; corr {out['corr_per_seed_eval']}")
+    for pair in pairs:
+        if len(pairs) > 1:
+            print(f"A = {pair['a']}, B = {pair['b']}")
+        _print_pair(pair, a.from_steps)
     if "final_policies" in out:
         d = out["final_policies"]["a_minus_b"]
         print(f"final policies on {a.n_goals} goals per seed: A - B "
@@ -160,12 +190,12 @@ def main(argv=None) -> int:
         print(f"wrote {a.out}")
     if a.plot:
         os.makedirs(os.path.dirname(os.path.abspath(a.plot)), exist_ok=True)
-        last = out["env_steps"][-1]
-        plots.compare_curves(
-            [(f"{name}: {os.path.basename(os.path.normpath(d))}",
-              [r for r in rows if r["env_steps"] <= last])
-             for name, d, rows in (("A", a.runs[0], rows_a), ("B", a.runs[1], rows_b))],
-            a.plot, f"{ca.task}, {ca.seeds} seeds")
+        last = pairs[0]["env_steps"][-1]
+        labels = a.labels or [f"{chr(ord('A') + i)}: {os.path.basename(os.path.normpath(d))}"
+                              for i, d in enumerate(a.runs)]
+        plots.compare_curves([(label, [r for r in rows if r["env_steps"] <= last])
+                              for label, (_, rows) in zip(labels, runs)],
+                             a.plot, f"{ca.task}, {ca.seeds} seeds")
         print(f"wrote {a.plot}")
     return 0
 
