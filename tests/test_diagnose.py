@@ -27,3 +27,47 @@ def test_profile_spearman_splits_the_path_at_8_cm_and_at_the_reset():
     assert res["spearman_on_the_way"] == pytest.approx(1.0)
     assert res["spearman_within_8cm"] == pytest.approx(1.0)
     assert res["spearman"] < 0.9 and res["spearman_beyond_8cm"] < 0.5
+
+
+class _Encoder:
+    """A goal encoder on 2-d latents: frame latent = mean pixel per channel pair; its
+    `sequence` either passes each frame through or holds the last non-empty frame."""
+
+    def __init__(self, holds: bool):
+        self.holds = holds
+
+    def frame_latents(self, frozen, scene_params, images):
+        import jax.numpy as jnp
+
+        return jnp.mean(images, axis=(-3, -2))[..., :2]
+
+    def single(self, lstm_params, z):
+        return z
+
+    def sequence(self, lstm_params, z):
+        import jax
+        import jax.numpy as jnp
+
+        if not self.holds:
+            return z
+
+        def step(held, x):
+            held = jnp.where(jnp.any(x != 0), x, held)
+            return held, held
+
+        return jax.lax.scan(step, jnp.zeros_like(z[0]), z)[1]
+
+
+def test_occlusion_scores_the_empty_image_and_the_lstm_memory():
+    pd = np.array([0.0, 5.0, 10.0, 20.0])  # cm; latent distances 0.1, 0.2, 0.5, 0.9
+    path = {"profile": {"path_cm": pd, "latent": np.array([0.1, 0.2, 0.5, 0.9])},
+            "goal_latent": np.array([0.3, 0.4]),  # the empty image's latent (0, 0) is 0.5 away
+            "visible_latents": np.array([[1.0, 1.0], [2.0, 0.0], [0.5, 0.5], [3.0, 1.0]])}
+    forgets = diagnose.occlusion(_Encoder(holds=False), None, None, None, path)
+    assert forgets["empty_latent_distance"] == pytest.approx(0.5)
+    assert forgets["share_of_path_worse_than_empty"] == pytest.approx(0.25)  # only 0.9 > 0.5
+    assert forgets["visible_beats_empty_within_cm"] == 5.0
+    assert forgets["memory_first_hidden_frame"] == pytest.approx(0.0, abs=1e-6)
+    holds = diagnose.occlusion(_Encoder(holds=True), None, None, None, path)
+    assert holds["memory_last_hidden_frame"] == pytest.approx(1.0, abs=1e-6)
+    assert len(holds["memory_per_hidden_frame"]) == diagnose.OCC_HIDDEN

@@ -4,7 +4,7 @@
     roll-analysis diagnose --plot before=A.json after=B.json --png PATHS.png
 
 DIR holds segmentation/ and encoders/ (a `roll_jax.encoders.pretrain --out` or a `train.py` run
-directory). Four measurements, each a question a failed learning run raises:
+directory). Five measurements, each a question a failed learning run raises:
 
 (a) `path`: does ROLL's reward point the right way along the way the puck must go? Pucks are
     placed every `step` along the task's corridor (`scenes.hurdle_path`; on puck_push a line
@@ -21,6 +21,14 @@ directory). Four measurements, each a question a failed learning run raises:
     step (Algorithm 1's exploration and relabelling goals), decoded by the object-VAE; each
     decoded puck's image centroid is matched to the nearest centroid of pucks rendered on a
     1 cm grid over the table: where it lies, and how many decoded images show no puck.
+(e) `occlusion`: can hiding the puck pay? The latent distance to the goal of an empty
+    segmented image (the puck wholly hidden, as by the claw over it) against (a)'s profile:
+    the share of path points where the visible puck scores worse than no puck. And does the
+    LSTM remember a hidden puck? Per path point, `OCC_VISIBLE` frames with the puck visible
+    then `OCC_HIDDEN` empty frames through the LSTM from a zero state: the `memory` of each
+    hidden frame is 1 - |z_hidden - z_visible| / |z_empty - z_visible|, where z_visible is the
+    last visible frame's encoding and z_empty one LSTM step on the empty image (1: the LSTM
+    keeps the puck; 0: it encodes the empty image as one step would).
 """
 
 from __future__ import annotations
@@ -35,6 +43,7 @@ NEAR = 0.08  # m: "within 8 cm of the goal"
 TOWARDS = 0.03  # m: a random episode "moves the puck towards the goal" by this much
 # Goal puck positions: the centre of each task's puck goal space.
 GOALS = {"hurdle_bottom": (0.105, 0.60), "hurdle_top": (0.105, 0.575), "puck_push": (0.0, 0.6)}
+OCC_VISIBLE, OCC_HIDDEN = 10, 20  # (e): frames with the puck in view, then hidden
 
 
 # ----------------------------------------------------------------------------- path geometry
@@ -247,6 +256,36 @@ def write_prior_png(decoded, path: str, n: int = 32) -> None:
     cv2.imwrite(path, grid[..., ::-1])
 
 
+def occlusion(enc, frozen, scene_params, lstm_params, path: dict) -> dict:
+    """(e): the empty image's latent distance against (a)'s `path` result, and the LSTM's
+    memory of a puck hidden after `OCC_VISIBLE` visible frames (`path`'s images re-rendered
+    by the caller: `visible_latents` [P, d] are the object-VAE means of its images)."""
+    import jax
+    import jax.numpy as jnp
+
+    empty = enc.frame_latents(frozen, scene_params, jnp.zeros((1, 48, 48, 3), jnp.float32))
+    goal_z = np.asarray(path["goal_latent"])
+    z_empty = np.asarray(enc.single(lstm_params, empty))[0]
+    d_empty = float(np.linalg.norm(z_empty - goal_z))
+    prof = path["profile"]
+    lat, pcm = np.asarray(prof["latent"]), np.asarray(prof["path_cm"])
+    vis = jnp.asarray(path["visible_latents"])  # [P, d]
+    seq = jnp.concatenate([jnp.repeat(vis[:, None], OCC_VISIBLE, 1),
+                           jnp.repeat(empty[None], vis.shape[0], 0).repeat(OCC_HIDDEN, 1)], 1)
+    z = np.asarray(jax.vmap(lambda x: enc.sequence(lstm_params, x))(seq))  # [P, T, d]
+    z_vis = z[:, OCC_VISIBLE - 1]
+    gap = np.linalg.norm(z_empty[None] - z_vis, axis=-1)
+    err = np.linalg.norm(z[:, OCC_VISIBLE:] - z_vis[:, None], axis=-1)  # [P, hidden]
+    memory = 1.0 - err / np.maximum(gap, 1e-6)[:, None]
+    beaten = pcm[lat < d_empty]
+    return {"empty_latent_distance": round(d_empty, 4),
+            "share_of_path_worse_than_empty": round(float((lat > d_empty).mean()), 3),
+            "visible_beats_empty_within_cm": float(beaten.max()) if beaten.size else 0.0,
+            "memory_first_hidden_frame": round(float(np.median(memory[:, 0])), 3),
+            "memory_last_hidden_frame": round(float(np.median(memory[:, -1])), 3),
+            "memory_per_hidden_frame": [round(float(m), 3) for m in np.median(memory, 0)]}
+
+
 def diagnose(task: str, run: str, seed: int = 0, png: str | None = None) -> dict:
     import jax
 
@@ -268,7 +307,29 @@ def diagnose(task: str, run: str, seed: int = 0, png: str | None = None) -> dict
         out["prior_goals"], decoded = prior_goal_positions(env, cfg, pre, seg, k_d)
         if png:
             write_prior_png(decoded, png)
+        out["occlusion"] = occlusion(*_occlusion_inputs(env, cfg, pre, seg, out["path"]))
     return out
+
+
+def _occlusion_inputs(env, cfg, pre, seg, path: dict):
+    """(e)'s arguments: the goal encoder, and (a)'s result with the object-VAE means of its
+    images (hand away) and the goal image's encoding."""
+    from roll_jax.encoders.goal_encoding import Frozen, goal_encoder
+
+    enc = goal_encoder(cfg)
+    frozen = Frozen(seg=seg, object_vae=pre.object_vae.params)
+    scene_params, lstm_params = pre.scene_vae.params, pre.lstm.params
+    render = _render_fn(env)
+    pts = np.asarray(path["profile"]["puck_xy"], np.float32)
+    away = np.repeat(_hand_away(env)[None], len(pts), 0)
+
+    def latents(hand, puck):
+        return enc.frame_latents(frozen, scene_params, enc.goal_images(frozen, render(hand, puck)))
+
+    goal = np.asarray(path["goal"], np.float32)[None]
+    goal_z = enc.single(lstm_params, latents(_goal_hand(env)[None], goal))[0]
+    full = {**path, "visible_latents": latents(away, pts), "goal_latent": goal_z}
+    return enc, frozen, scene_params, lstm_params, full
 
 
 def plot_paths(results: dict, png: str) -> None:
