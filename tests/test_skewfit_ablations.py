@@ -389,8 +389,8 @@ def test_online_scene_vae_round_recomputes_log_p_of_the_filled_episodes_only():
 
 
 def test_single_achieved_encoding_is_the_goal_images_function_frame_by_frame():
-    seq = goal_encoder(make_config("puck_push", "roll", "smoke"))
-    one = goal_encoder(make_config("puck_push", "roll", "smoke", achieved_encoding="single"))
+    seq = goal_encoder(make_config("puck_push", "roll", "smoke", achieved_encoding="sequence"))
+    one = goal_encoder(make_config("puck_push", "roll", "smoke"))  # the default
     assert not seq.achieved_single and one.achieved_single
     cfg = make_config("puck_push", "roll", "smoke")
     lstm = steps.init_lstm(jax.random.PRNGKey(1), cfg.lstm, seq.frame_dim)
