@@ -109,9 +109,12 @@ class Env:
         self.camera: Camera = spec.camera
         self.xml = scenes.scene_xml(spec.name, with_object)
         self.mj_model = mujoco.MjModel.from_xml_string(self.xml)
-        self.mjx_model = mjx.put_model(self.mj_model)
+        # this process's first device: MJX's default, jax.devices()[0], belongs to process 0
+        # when several processes run one program (jax.distributed)
+        device = jax.local_devices()[0]
+        self.mjx_model = mjx.put_model(self.mj_model, device=device)
         self.geom_label = geom_labels(self.mj_model)
-        self._data0 = mjx.make_data(self.mjx_model)
+        self._data0 = mjx.make_data(self.mjx_model, device=device)
         self._hand_body = self.mj_model.body("hand").id
         self._hand_low = jnp.asarray(spec.hand_low, jnp.float32)
         self._hand_high = jnp.asarray(spec.hand_high, jnp.float32)

@@ -190,28 +190,6 @@ def initialize_distributed(coordinator_address: str | None = None,
                                 ("process_id", process_id)) if v is not None}
     jax.config.update("jax_cpu_collectives_implementation", "gloo")
     jax.distributed.initialize(**kwargs)
-    if jax.process_count() > 1:
-        _mjx_on_local_device()
-
-
-def _mjx_on_local_device() -> None:
-    """MJX places a model or data given no device on `jax.devices()[0]`, which in a process
-    other than the first is another process's device (`mjx.make_data` then fails, as does every
-    env built by `envs_mjx.make`). Here the device MJX picks is this process's first one; the
-    arrays are per-process copies either way (the train state is placed by the seed sharding)."""
-    try:
-        from mujoco.mjx._src import io
-    except ImportError:  # another MJX layout: left as it is
-        return
-    resolve = getattr(io, "_resolve_impl_and_device", None)
-    if resolve is None or getattr(resolve, "_roll_local", False):
-        return
-
-    def local(impl=None, device=None):
-        return resolve(impl, jax.local_devices()[0] if device is None else device)
-
-    local._roll_local = True
-    io._resolve_impl_and_device = local
 
 
 def is_main_process() -> bool:
