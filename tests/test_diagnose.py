@@ -59,13 +59,14 @@ class _Encoder:
 
 
 def test_occlusion_scores_the_empty_image_and_the_lstm_memory():
-    pd = np.array([0.0, 5.0, 10.0, 20.0])  # cm; latent distances 0.1, 0.2, 0.5, 0.9
-    path = {"profile": {"path_cm": pd, "latent": np.array([0.1, 0.2, 0.5, 0.9])},
-            "goal_latent": np.array([0.3, 0.4]),  # the empty image's latent (0, 0) is 0.5 away
-            "visible_latents": np.array([[1.0, 1.0], [2.0, 0.0], [0.5, 0.5], [3.0, 1.0]])}
+    pd = np.array([0.0, 5.0, 10.0, 20.0])  # cm
+    # the goal at (0.3, 0.4): the empty image's latent (0, 0) is 0.5 away; the visible puck's
+    # are 0.1, 0.2, 0.6 and 0.9 away
+    path = {"profile": {"path_cm": pd}, "goal_frame_latent": np.array([0.3, 0.4]),
+            "visible_latents": np.array([[0.3, 0.5], [0.3, 0.6], [0.3, -0.2], [1.2, 0.4]])}
     forgets = diagnose.occlusion(_Encoder(holds=False), None, None, None, path)
     assert forgets["empty_latent_distance"] == pytest.approx(0.5)
-    assert forgets["share_of_path_worse_than_empty"] == pytest.approx(0.25)  # only 0.9 > 0.5
+    assert forgets["share_of_path_worse_than_empty"] == pytest.approx(0.5)  # 0.6, 0.9 > 0.5
     assert forgets["visible_beats_empty_within_cm"] == 5.0
     assert forgets["memory_first_hidden_frame"] == pytest.approx(0.0, abs=1e-6)
     holds = diagnose.occlusion(_Encoder(holds=True), None, None, None, path)

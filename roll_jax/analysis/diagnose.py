@@ -28,7 +28,9 @@ directory). Five measurements, each a question a failed learning run raises:
     then `OCC_HIDDEN` empty frames through the LSTM from a zero state: the `memory` of each
     hidden frame is 1 - |z_hidden - z_visible| / |z_empty - z_visible|, where z_visible is the
     last visible frame's encoding and z_empty one LSTM step on the empty image (1: the LSTM
-    keeps the puck; 0: it encodes the empty image as one step would).
+    keeps the puck; 0: it encodes the empty image as one step would). On a train.py run
+    directory (e) is measured twice: with the pretrained LSTM (`occlusion`) and with seed 0's
+    LSTM as online training left it (`occlusion_trained_lstm`).
 """
 
 from __future__ import annotations
@@ -257,19 +259,20 @@ def write_prior_png(decoded, path: str, n: int = 32) -> None:
 
 
 def occlusion(enc, frozen, scene_params, lstm_params, path: dict) -> dict:
-    """(e): the empty image's latent distance against (a)'s `path` result, and the LSTM's
-    memory of a puck hidden after `OCC_VISIBLE` visible frames (`path`'s images re-rendered
-    by the caller: `visible_latents` [P, d] are the object-VAE means of its images)."""
+    """(e) with the LSTM `lstm_params`: the empty image's latent distance to the goal against
+    the visible puck's along the path, and the LSTM's memory of a puck hidden after
+    `OCC_VISIBLE` visible frames. `path`: (a)'s result plus `visible_latents` [P, d] and
+    `goal_frame_latent` [d], the object-VAE means of its images and of the goal image."""
     import jax
     import jax.numpy as jnp
 
     empty = enc.frame_latents(frozen, scene_params, jnp.zeros((1, 48, 48, 3), jnp.float32))
-    goal_z = np.asarray(path["goal_latent"])
+    vis = jnp.asarray(path["visible_latents"])  # [P, d]
+    goal_z = np.asarray(enc.single(lstm_params, jnp.asarray(path["goal_frame_latent"])[None]))[0]
     z_empty = np.asarray(enc.single(lstm_params, empty))[0]
     d_empty = float(np.linalg.norm(z_empty - goal_z))
-    prof = path["profile"]
-    lat, pcm = np.asarray(prof["latent"]), np.asarray(prof["path_cm"])
-    vis = jnp.asarray(path["visible_latents"])  # [P, d]
+    lat = np.linalg.norm(np.asarray(enc.single(lstm_params, vis)) - goal_z, axis=-1)
+    pcm = np.asarray(path["profile"]["path_cm"])
     seq = jnp.concatenate([jnp.repeat(vis[:, None], OCC_VISIBLE, 1),
                            jnp.repeat(empty[None], vis.shape[0], 0).repeat(OCC_HIDDEN, 1)], 1)
     z = np.asarray(jax.vmap(lambda x: enc.sequence(lstm_params, x))(seq))  # [P, T, d]
@@ -308,7 +311,32 @@ def diagnose(task: str, run: str, seed: int = 0, png: str | None = None) -> dict
         if png:
             write_prior_png(decoded, png)
         out["occlusion"] = occlusion(*_occlusion_inputs(env, cfg, pre, seg, out["path"]))
+        trained = trained_lstm(run)
+        if trained is not None:  # the LSTM as online training left it (seed 0)
+            enc, frozen, scene_params, _, full = _occlusion_inputs(env, cfg, pre, seg,
+                                                                   out["path"])
+            out["occlusion_trained_lstm"] = occlusion(enc, frozen, scene_params, trained, full)
     return out
+
+
+def trained_lstm(run: str):
+    """Seed 0's LSTM parameters from a train.py run's latest checkpoint (None for a
+    pretraining directory or a run without a checkpoint)."""
+    import jax
+
+    from roll_jax.analysis.checkpoints import is_run
+
+    if not (is_run(run) and os.path.isdir(os.path.join(run, "ckpt"))):
+        return None
+    from roll_jax.analysis import evaluation
+
+    try:
+        loaded = evaluation.load_run(run)
+    except FileNotFoundError:
+        return None
+    if loaded.state.lstm is None:
+        return None
+    return jax.tree.map(lambda x: x[0], loaded.state.lstm.params)
 
 
 def _occlusion_inputs(env, cfg, pre, seg, path: dict):
@@ -327,8 +355,8 @@ def _occlusion_inputs(env, cfg, pre, seg, path: dict):
         return enc.frame_latents(frozen, scene_params, enc.goal_images(frozen, render(hand, puck)))
 
     goal = np.asarray(path["goal"], np.float32)[None]
-    goal_z = enc.single(lstm_params, latents(_goal_hand(env)[None], goal))[0]
-    full = {**path, "visible_latents": latents(away, pts), "goal_latent": goal_z}
+    full = {**path, "visible_latents": latents(away, pts),
+            "goal_frame_latent": latents(_goal_hand(env)[None], goal)[0]}
     return enc, frozen, scene_params, lstm_params, full
 
 
