@@ -43,15 +43,15 @@ def test_final_policy_difference_is_per_episode():
     assert out["median_a_minus_b_cm"] == pytest.approx(-1.0)
 
 
-def test_compare_command_pairs_two_run_directories_and_plots_them(tmp_path, capsys):
-    import json
-
+def _finished_runs(tmp_path, shifts: dict) -> list[str]:
+    """Finished 2-seed run directories whose final distances are 0.1 - 0.01 i + shift at
+    evaluation i (500 env steps apart), one per name -> shift."""
     from configs.train import build_config
     from roll_jax.training import run_dir
 
     cfg = build_config("puck_push", "roll", "smoke", seeds=2)
     runs = []
-    for name, shift in (("a", -0.01), ("b", 0.01)):
+    for name, shift in shifts.items():
         d = tmp_path / name
         d.mkdir()
         run_dir.write_config(str(d), cfg)
@@ -60,6 +60,13 @@ def test_compare_command_pairs_two_run_directories_and_plots_them(tmp_path, caps
              "start_distance": 0.1} for i in range(3) for s in range(2)])
         (d / run_dir.COMPLETE_MARKER).write_text("{}")
         runs.append(str(d))
+    return runs
+
+
+def test_compare_command_pairs_two_run_directories_and_plots_them(tmp_path, capsys):
+    import json
+
+    runs = _finished_runs(tmp_path, {"a": -0.01, "b": 0.01})
     out, png = tmp_path / "cmp.json", tmp_path / "fig" / "cmp.png"
     assert compare.main([*runs, "--out", str(out), "--plot", str(png)]) == 0
     assert png.stat().st_size > 0 and f"wrote {png}" in capsys.readouterr().out
@@ -71,20 +78,7 @@ def test_compare_command_pairs_two_run_directories_and_plots_them(tmp_path, caps
 def test_compare_pairs_every_further_run_with_the_first(tmp_path, capsys):
     import json
 
-    from configs.train import build_config
-    from roll_jax.training import run_dir
-
-    cfg = build_config("puck_push", "roll", "smoke", seeds=2)
-    runs = []
-    for name, shift in (("a", 0.0), ("b", 0.01), ("c", -0.03)):
-        d = tmp_path / name
-        d.mkdir()
-        run_dir.write_config(str(d), cfg)
-        run_dir.append_rows(str(d / "metrics.csv"), [
-            {"env_steps": 500 * i, "seed": s, "final_distance": 0.1 - 0.01 * i + shift,
-             "start_distance": 0.1} for i in range(3) for s in range(2)])
-        (d / run_dir.COMPLETE_MARKER).write_text("{}")
-        runs.append(str(d))
+    runs = _finished_runs(tmp_path, {"a": 0.0, "b": 0.01, "c": -0.03})
     out, png = tmp_path / "cmp.json", tmp_path / "cmp.png"
     assert compare.main([*runs, "--labels", "A", "B", "C", "--out", str(out),
                          "--plot", str(png)]) == 0
