@@ -13,8 +13,8 @@ $(STAMP): pyproject.toml
 	$(VENV)/bin/pip install -q --no-compile -e ".[test]"
 	touch $(STAMP)
 
-# ROLL from pixels on puck_push at the cpu preset, cut to 30k env steps and 2 seeds so that the
-# whole job (segmentation, pretraining, training) took 35 min on 2 shared cores (target: 15).
+# ROLL from pixels on puck_push at the cpu preset, cut to 30k env steps and 2 seeds: the whole
+# job (segmentation, pretraining, training) took 35 min on 2 shared cores.
 train: $(STAMP)
 	$(VENV)/bin/python train.py --task puck_push --algo roll --preset cpu --seeds 2 --set total_env_steps=30000 --out runs/puck_push_roll_cpu
 
