@@ -310,11 +310,11 @@ def diagnose(task: str, run: str, seed: int = 0, png: str | None = None) -> dict
         out["prior_goals"], decoded = prior_goal_positions(env, cfg, pre, seg, k_d)
         if png:
             write_prior_png(decoded, png)
-        out["occlusion"] = occlusion(*_occlusion_inputs(env, cfg, pre, seg, out["path"]))
+        enc, frozen, scene_params, lstm_params, full = _occlusion_inputs(env, cfg, pre, seg,
+                                                                         out["path"])
+        out["occlusion"] = occlusion(enc, frozen, scene_params, lstm_params, full)
         trained = trained_lstm(run)
         if trained is not None:  # the LSTM as online training left it (seed 0)
-            enc, frozen, scene_params, _, full = _occlusion_inputs(env, cfg, pre, seg,
-                                                                   out["path"])
             out["occlusion_trained_lstm"] = occlusion(enc, frozen, scene_params, trained, full)
     return out
 
@@ -326,13 +326,13 @@ def trained_lstm(run: str):
 
     from roll_jax.analysis.checkpoints import is_run
 
-    if not (is_run(run) and os.path.isdir(os.path.join(run, "ckpt"))):
+    if not is_run(run):
         return None
     from roll_jax.analysis import evaluation
 
     try:
         loaded = evaluation.load_run(run)
-    except FileNotFoundError:
+    except FileNotFoundError:  # no checkpoint yet
         return None
     if loaded.state.lstm is None:
         return None
