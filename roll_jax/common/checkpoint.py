@@ -95,23 +95,33 @@ def _quiet_failed_reads() -> None:
     """A failed restore leaves orbax's other array reads pending; when they finish after its
     event loop closed, Python prints each one's traceback ("RuntimeError: Event loop is
     closed", "Encountered error while reading array index"), hundreds of lines that say no
-    more than the error already reported. Those, and only those, are dropped from the first
-    restore on (installed once per process)."""
+    more than the error already reported; a gathering future of those reads that is collected
+    unread is logged by asyncio the same way ("_GatheringFuture exception was never
+    retrieved"). Those, and only those, are dropped from the first restore on (installed once
+    per process), from both Python's unraisable hook and the asyncio logger."""
     global _UNRAISABLE_FILTERED
+    import logging
     import sys
 
     if _UNRAISABLE_FILTERED:
         return
     previous = sys.unraisablehook
 
+    def left_behind(exc) -> bool:
+        text = str(exc)
+        return (isinstance(exc, RuntimeError) and text == "Event loop is closed") or \
+            text.startswith("Encountered error while reading array")
+
     def hook(u):
-        text = str(u.exc_value)
-        if (isinstance(u.exc_value, RuntimeError) and text == "Event loop is closed") or \
-                text.startswith("Encountered error while reading array"):
-            return
-        previous(u)
+        if not left_behind(u.exc_value):
+            previous(u)
+
+    def keep(record: logging.LogRecord) -> bool:
+        exc = record.exc_info[1] if record.exc_info else None
+        return exc is None or not left_behind(exc)
 
     sys.unraisablehook = hook
+    logging.getLogger("asyncio").addFilter(keep)
     _UNRAISABLE_FILTERED = True
 
 
