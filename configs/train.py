@@ -38,7 +38,7 @@ VAE_SCHEDULES = ("custom_schedule", "custom_schedule_2", "smoke", "none")
 CHOICES = {"vae_schedule": VAE_SCHEDULES,
            "scene_pretrain_data": ("random_policy", "goals", "region"),
            "reward_norm": REWARD_NORMS, "prior_goals": ("standard", "buffer"),
-           "achieved_encoding": ("sequence", "single"),
+           "achieved_encoding": ("sequence", "single", "held"),
            "sac_schedule": SAC_SCHEDULES}
 
 
@@ -112,6 +112,11 @@ class TrainConfig:
     # hurdle_top 10.0 against 12.5 cm at 50k, 2.8 +- 0.2 cm lower paired over the second
     # half's evaluations (docs/results.md, "Reward encoding").
     achieved_encoding: str = "single"
+    # "held": "single", except that a frame whose segmented image shows fewer than this many
+    # object pixels (the arm over the object) keeps the last achieved goal that showed it. 10:
+    # half the fewest a visible puck shows anywhere along hurdle_top's corridor (20; 20-55
+    # along it, docs/encoders.md).
+    held_min_pixels: int = 10
     # Ablations (paper section "Ablations"), flags on --algo roll.
     matching_loss: bool = True
     use_lstm: bool = True
@@ -172,6 +177,12 @@ class TrainConfig:
         if not self.use_lstm and not self.use_object_vae:
             raise ValueError("--no-lstm and --no-object-vae together remove the whole object "
                              "encoder; pick one")
+        if self.achieved_encoding == "held" and self.algo == "roll" and not self.use_object_vae:
+            raise ValueError("achieved_encoding='held' counts the object's pixels in the "
+                             "segmented image, which --no-object-vae does not make")
+        if self.held_min_pixels <= 0:
+            raise ValueError(f"TrainConfig.held_min_pixels must be positive, got "
+                             f"{self.held_min_pixels}")
         if self.algo == "roll" and self.use_lstm and self.scene_vae is not None:
             frame = self.scene_vae if not self.use_object_vae else self.object_vae
             if frame is not None and self.lstm.out_dim != frame.latent_dim:

@@ -391,14 +391,44 @@ def test_online_scene_vae_round_recomputes_log_p_of_the_filled_episodes_only():
 def test_single_achieved_encoding_is_the_goal_images_function_frame_by_frame():
     seq = goal_encoder(make_config("puck_push", "roll", "smoke", achieved_encoding="sequence"))
     one = goal_encoder(make_config("puck_push", "roll", "smoke"))  # the default
-    assert not seq.achieved_single and one.achieved_single
+    assert seq.achieved_by.name == "sequence" and one.achieved_by.name == "single"
     cfg = make_config("puck_push", "roll", "smoke")
     lstm = steps.init_lstm(jax.random.PRNGKey(1), cfg.lstm, seq.frame_dim)
     x = jax.random.normal(jax.random.PRNGKey(2), (TT, seq.frame_dim))
-    single = one.achieved(lstm.params, x)
+    single = one.achieved(lstm.params, x, None)
     # frame t alone, one step from the zero state: what a goal image of that frame gets
     for t in (0, 3, TT - 1):
         np.testing.assert_allclose(single[t], one.single(lstm.params, x[t]), rtol=1e-5, atol=1e-6)
-    sequence = seq.achieved(lstm.params, x)
+    sequence = seq.achieved(lstm.params, x, None)
     np.testing.assert_allclose(sequence[0], single[0], rtol=1e-5, atol=1e-6)  # same first step
     assert float(jnp.abs(sequence[1:] - single[1:]).max()) > 1e-4  # later steps remember
+
+
+def test_held_achieved_encoding_keeps_the_last_goal_that_showed_the_object():
+    cfg = make_config("puck_push", "roll", "smoke", achieved_encoding="held", held_min_pixels=5)
+    held, one = goal_encoder(cfg), goal_encoder(make_config("puck_push", "roll", "smoke"))
+    lstm = steps.init_lstm(jax.random.PRNGKey(1), cfg.lstm, held.frame_dim)
+    x = jax.random.normal(jax.random.PRNGKey(2), (9, held.frame_dim))
+    images = np.zeros((9, 48, 48, 3), np.uint8)
+    images[:, 10:13, 10:13, 1] = 40  # 9 object pixels: shown
+    images[3:7] = 0  # frames 3-5: hidden
+    images[6, 10, 10:14, 0] = 7  # frame 6: 4 pixels, fewer than 5: hidden too
+    got = held.achieved(lstm.params, x, jnp.asarray(images))
+    single = one.achieved(lstm.params, x, None)
+    for t in range(9):
+        want = single[2] if 3 <= t <= 6 else single[t]
+        np.testing.assert_allclose(got[t], want, rtol=1e-5, atol=1e-6)
+    # An episode that starts hidden keeps its first frame's own goal until the object shows.
+    images[:2] = 0
+    got = held.achieved(lstm.params, x, jnp.asarray(images))
+    np.testing.assert_allclose(got[1], single[0], rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(got[2], single[2], rtol=1e-5, atol=1e-6)
+
+
+@pytest.mark.parametrize("overrides, pattern", [
+    (dict(achieved_encoding="held", use_object_vae=False), "no-object-vae"),
+    (dict(achieved_encoding="held", held_min_pixels=0), "held_min_pixels must be positive, got 0"),
+])
+def test_held_encoding_refuses_what_it_cannot_count(overrides, pattern):
+    with pytest.raises(ValueError, match=pattern):
+        make_config("puck_push", "roll", "smoke", **overrides)

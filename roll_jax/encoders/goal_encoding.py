@@ -45,6 +45,63 @@ class Frozen:
     object_vae: Any  # object-VAE params or None
 
 
+# --- achieved goals: how an episode's frames become the reward's achieved side -------------
+
+@dataclasses.dataclass(frozen=True)
+class SequenceAchieved:
+    """The LSTM run over the episode so far (the paper's z_t = g(z_hat_1..t))."""
+    name: ClassVar[str] = "sequence"
+
+    def __call__(self, enc: "GoalEncoder", lstm_params, frame_latents, object_images):
+        del object_images
+        return enc.sequence(lstm_params, frame_latents)
+
+
+@dataclasses.dataclass(frozen=True)
+class SingleAchieved:
+    """Each frame alone, one LSTM step from the zero state: the goal images' function (the
+    reference code's refresh_latents)."""
+    name: ClassVar[str] = "single"
+
+    def __call__(self, enc: "GoalEncoder", lstm_params, frame_latents, object_images):
+        del object_images
+        return enc.single(lstm_params, frame_latents)
+
+
+@dataclasses.dataclass(frozen=True)
+class HeldAchieved:
+    """`SingleAchieved`, except that a frame whose segmented image shows fewer than
+    `min_pixels` object pixels (the object hidden by the arm) keeps the achieved goal of the
+    last frame that showed it (the episode's first frame keeps its own): the memory the LSTM
+    is meant to give, made exact, so hiding the object earns what leaving it in view does."""
+    min_pixels: int
+    name: ClassVar[str] = "held"
+
+    def __call__(self, enc: "GoalEncoder", lstm_params, frame_latents, object_images):
+        single = enc.single(lstm_params, frame_latents)
+        visible = object_pixels(object_images) >= self.min_pixels  # [T]
+
+        def step(last, x):
+            z, seen = x
+            z = jnp.where(seen, z, last)
+            return z, z
+
+        _, held = jax.lax.scan(step, single[0], (single, visible))
+        return held
+
+
+def object_pixels(object_images):
+    """Pixels [...] of segmented images [..., H, W, 3] (rgb * mask) that show the object."""
+    return jnp.any(object_images > 0, axis=-1).sum(axis=(-2, -1))
+
+
+def achieved_encoding(cfg) -> SequenceAchieved | SingleAchieved | HeldAchieved:
+    """The achieved-goal strategy a TrainConfig names (`achieved_encoding`)."""
+    if cfg.achieved_encoding == "held":
+        return HeldAchieved(cfg.held_min_pixels)
+    return {"sequence": SequenceAchieved, "single": SingleAchieved}[cfg.achieved_encoding]()
+
+
 @dataclasses.dataclass(frozen=True)
 class GoalEncoder:
     """How images become goal/achieved latents (the reward space)."""
@@ -56,9 +113,8 @@ class GoalEncoder:
     # Fresh goals (exploration, HER's fresh share) from the replay buffer skewed by p(x)^alpha
     # (Skew-Fit) instead of the prior (ROLL's Algorithm 1); see her.fresh_goals.
     skewed_goals: bool = False
-    # Achieved goals frame by frame (one LSTM step from the zero state, like a goal image)
-    # instead of the LSTM over the episode (TrainConfig.achieved_encoding).
-    achieved_single: bool = False
+    # How an episode's frames become achieved goals (TrainConfig.achieved_encoding).
+    achieved_by: SequenceAchieved | SingleAchieved | HeldAchieved = SequenceAchieved()
     from_pixels: ClassVar[bool] = True  # (the state oracle's is False)
 
     @property
@@ -97,12 +153,10 @@ class GoalEncoder:
             return frame_latents
         return lstm_encode(lstm_params, frame_latents)
 
-    def achieved(self, lstm_params, frame_latents):
-        """Achieved goals [T, goal_dim] of one episode's latents [T, d]: `sequence`, or with
-        `achieved_single` each frame by `single`, as a goal image is encoded."""
-        if self.achieved_single:
-            return self.single(lstm_params, frame_latents)
-        return self.sequence(lstm_params, frame_latents)
+    def achieved(self, lstm_params, frame_latents, object_images):
+        """Achieved goals [T, goal_dim] of one episode's latents [T, d] and its segmented
+        images [T, H, W, 3], as `achieved_by` encodes them."""
+        return self.achieved_by(self, lstm_params, frame_latents, object_images)
 
     def single(self, lstm_params, frame_latents):
         """Goals from single frames [..., d] (a goal image, or a prior sample): one LSTM step
@@ -142,7 +196,7 @@ class GoalEncoder:
         (`frame_latents`, `achieved`)."""
         goal_imgs = self.goal_images(frozen, records)
         frame_lat = self.frame_latents(frozen, scene_params, goal_imgs)
-        achieved = jax.vmap(lambda f: self.achieved(lstm_params, f))(frame_lat)
+        achieved = jax.vmap(lambda f, o: self.achieved(lstm_params, f, o))(frame_lat, goal_imgs)
         return records, goal_imgs, frame_lat, achieved
 
     def goal_bank(self, env, key, lstm_params, stats=None):
@@ -172,10 +226,10 @@ def goal_encoder(cfg) -> GoalEncoder | StateOracle:
         return GoalEncoder(cfg.scene, None, segment=False, lstm=False, skewed_goals=True)
     if not cfg.use_object_vae:
         return GoalEncoder(cfg.scene, None, segment=False, lstm=True,
-                           achieved_single=cfg.achieved_encoding == "single")
+                           achieved_by=achieved_encoding(cfg))
     object_cfg = cfg.object_vae
     if not (cfg.matching_loss and cfg.use_lstm):
         # Pretraining fits the object-VAE from this config, so the ablation reaches it too.
         object_cfg = dataclasses.replace(object_cfg, matching_coef=0.0)
     return GoalEncoder(cfg.scene, object_cfg, segment=True, lstm=cfg.use_lstm,
-                       achieved_single=cfg.achieved_encoding == "single")
+                       achieved_by=achieved_encoding(cfg))

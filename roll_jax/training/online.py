@@ -95,11 +95,14 @@ def refresh_scene(cfg: TrainConfig, enc: GoalEncoder, state):
 
 
 def refresh_goals(enc: GoalEncoder, state):
-    """The buffer's goal latents from its cached frame latents (`enc.achieved` of each episode;
-    no image is encoded: the frame latents change only with `refresh_scene`)."""
+    """The buffer's goal latents from its cached frame latents and segmented images
+    (`enc.achieved` of each episode; no image is encoded: the frame latents change only with
+    `refresh_scene`)."""
     lstm_params = lstm_params_of(state)
-    buf = replay.recompute(state.buffer, "goal_latents", lambda e: enc.achieved(lstm_params, e),
-                           state.buffer.frame_latents, GOAL_REFRESH_CHUNK)
+    buf = replay.recompute(state.buffer, "goal_latents",
+                           lambda e: enc.achieved(lstm_params, *e),
+                           (state.buffer.frame_latents, state.buffer.object_images),
+                           GOAL_REFRESH_CHUNK)
     return state.replace(buffer=buf)
 
 
