@@ -105,17 +105,18 @@ class TrainConfig:
     # N(mean, std) of the stored frame latents (rlkit's dist_mu / dist_std, the reference
     # code's sample_from_true_prior=False).
     prior_goals: str = "standard"
-    # The achieved goals on the reward's other side: "single", each frame one LSTM step from
-    # the zero state, the same function as a goal image's (the reference code's
-    # refresh_latents -> LSTM_wrapped_env._encode_lstm); "sequence", the LSTM run over the
-    # episode so far (the paper's z_t = g(z_hat_1..t)). "single" because it measured better:
-    # hurdle_top 10.0 against 12.5 cm at 50k, 2.8 +- 0.2 cm lower paired over the second
-    # half's evaluations (docs/results.md, "Reward encoding").
-    achieved_encoding: str = "single"
-    # "held": "single", except that a frame whose segmented image shows fewer than this many
-    # object pixels (the arm over the object) keeps the last achieved goal that showed it. 10:
-    # half the fewest a visible puck shows anywhere along hurdle_top's corridor (20; 20-55
-    # along it, docs/encoders.md).
+    # The achieved goals on the reward's other side: "held", each frame one LSTM step from the
+    # zero state, the same function as a goal image's, except that a frame whose segmented
+    # image shows fewer than held_min_pixels object pixels (the arm over the object) keeps
+    # the last achieved goal that showed it; "single", every frame one step (the reference
+    # code's refresh_latents -> LSTM_wrapped_env._encode_lstm); "sequence", the LSTM run over
+    # the episode so far (the paper's z_t = g(z_hat_1..t)). "held" because it measured best:
+    # at 50k hurdle_top 5.7 cm against 10.0 ("single") and 12.5 ("sequence"), hurdle_bottom
+    # 2.1 against 3.9 ("sequence") (docs/results.md, "Reward encoding"). --no-object-vae
+    # segments nothing, so it takes "single".
+    achieved_encoding: str = "held"
+    # 10: half the fewest object pixels a visible puck shows anywhere along hurdle_top's
+    # corridor (20; 20-55 along it, docs/encoders.md).
     held_min_pixels: int = 10
     # Ablations (paper section "Ablations"), flags on --algo roll.
     matching_loss: bool = True
@@ -229,6 +230,11 @@ def _object_vae(task: str, over) -> VAEConfig:
     return object_vae_config(task, **over)
 
 
+def _default(name: str):
+    """TrainConfig's default for field `name`."""
+    return {f.name: f.default for f in dataclasses.fields(TrainConfig)}[name]
+
+
 def make_config(task: str, algo: str = "roll", preset: str = "paper", **overrides) -> TrainConfig:
     """The config of `task` x `algo` x `preset`; keyword overrides win (nested configs are
     replaced whole: pass e.g. sac=dataclasses.replace(cfg.sac, batch_size=256))."""
@@ -251,6 +257,11 @@ def make_config(task: str, algo: str = "roll", preset: str = "paper", **override
         # --no-object-vae: the LSTM runs on (and reconstructs) scene-VAE latents.
         values["lstm"] = dataclasses.replace(values["lstm"],
                                              out_dim=values["scene_vae"].latent_dim)
+    if (not values.get("use_object_vae", True) and "achieved_encoding" not in overrides
+            and values.get("achieved_encoding", _default("achieved_encoding")) == "held"):
+        # --no-object-vae segments nothing, so no object pixels are counted: each frame is
+        # its own achieved goal ("single"). Asking for "held" with it is refused (validate).
+        values["achieved_encoding"] = "single"
     return TrainConfig(task=task, algo=algo, preset=preset, **values)
 
 

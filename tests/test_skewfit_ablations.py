@@ -13,7 +13,7 @@ import pytest
 from scipy import stats
 
 from configs.encoders import VAEConfig
-from configs.train import make_config
+from configs.train import build_config, make_config
 from roll_jax.agents import her, replay, skewfit
 from roll_jax.encoders import losses, models, steps
 from roll_jax.encoders.goal_encoding import PRIOR_BANK, Frozen, GoalEncoder, goal_encoder
@@ -294,7 +294,8 @@ def test_no_object_vae_lstm_reconstructs_scene_latents_on_every_task():
         cfg = make_config(task, "roll", "smoke", use_object_vae=False)
         assert cfg.lstm.out_dim == cfg.scene.latent_dim, task
     with pytest.raises(ValueError, match="lstm.out_dim=6 must equal the scene-VAE latent size 16"):
-        dataclasses.replace(make_config("door_open", "roll", "smoke"), use_object_vae=False)
+        dataclasses.replace(make_config("door_open", "roll", "smoke", achieved_encoding="single"),
+                            use_object_vae=False)
 
 
 def test_encoder_checkpoint_of_full_roll_is_refused_by_the_matching_ablation(tmp_path):
@@ -390,8 +391,9 @@ def test_online_scene_vae_round_recomputes_log_p_of_the_filled_episodes_only():
 
 def test_single_achieved_encoding_is_the_goal_images_function_frame_by_frame():
     seq = goal_encoder(make_config("puck_push", "roll", "smoke", achieved_encoding="sequence"))
-    one = goal_encoder(make_config("puck_push", "roll", "smoke"))  # the default
+    one = goal_encoder(make_config("puck_push", "roll", "smoke", achieved_encoding="single"))
     assert seq.achieved_by.name == "sequence" and one.achieved_by.name == "single"
+    assert goal_encoder(make_config("puck_push", "roll", "smoke")).achieved_by.name == "held"
     cfg = make_config("puck_push", "roll", "smoke")
     lstm = steps.init_lstm(jax.random.PRNGKey(1), cfg.lstm, seq.frame_dim)
     x = jax.random.normal(jax.random.PRNGKey(2), (TT, seq.frame_dim))
@@ -406,7 +408,8 @@ def test_single_achieved_encoding_is_the_goal_images_function_frame_by_frame():
 
 def test_held_achieved_encoding_keeps_the_last_goal_that_showed_the_object():
     cfg = make_config("puck_push", "roll", "smoke", achieved_encoding="held", held_min_pixels=5)
-    held, one = goal_encoder(cfg), goal_encoder(make_config("puck_push", "roll", "smoke"))
+    held = goal_encoder(cfg)
+    one = goal_encoder(make_config("puck_push", "roll", "smoke", achieved_encoding="single"))
     lstm = steps.init_lstm(jax.random.PRNGKey(1), cfg.lstm, held.frame_dim)
     x = jax.random.normal(jax.random.PRNGKey(2), (9, held.frame_dim))
     images = np.zeros((9, 48, 48, 3), np.uint8)
@@ -432,3 +435,15 @@ def test_held_achieved_encoding_keeps_the_last_goal_that_showed_the_object():
 def test_held_encoding_refuses_what_it_cannot_count(overrides, pattern):
     with pytest.raises(ValueError, match=pattern):
         make_config("puck_push", "roll", "smoke", **overrides)
+
+
+def test_no_object_vae_takes_single_achieved_goals_unless_held_is_asked_for():
+    # Nothing is segmented without the object-VAE, so the default "held" becomes "single";
+    # asking for "held" explicitly is refused rather than changed.
+    assert make_config("puck_push", "roll", "smoke").achieved_encoding == "held"
+    cfg = build_config("puck_push", "roll", "smoke", use_object_vae=False)
+    assert cfg.achieved_encoding == "single"
+    assert goal_encoder(cfg).achieved_by.name == "single"
+    with pytest.raises(ValueError, match="no-object-vae"):
+        build_config("puck_push", "roll", "smoke", overrides=['achieved_encoding="held"'],
+                     use_object_vae=False)
