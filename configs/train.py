@@ -111,9 +111,10 @@ class TrainConfig:
     # the last achieved goal that showed it; "single", every frame one step (the reference
     # code's refresh_latents -> LSTM_wrapped_env._encode_lstm); "sequence", the LSTM run over
     # the episode so far (the paper's z_t = g(z_hat_1..t)). "held" because it measured best:
-    # at 50k hurdle_top 5.7 cm against 10.0 ("single") and 12.5 ("sequence"), hurdle_bottom
-    # 2.1 against 3.9 ("sequence") (docs/results.md, "Reward encoding"). --no-object-vae
-    # segments nothing, so it takes "single".
+    # at 50k hurdle_top 5.7 cm (10.1 on base seed 1) against 10.0 ("single") and 12.5
+    # ("sequence"), hurdle_bottom 2.1 against 3.9 ("sequence"); puck_push 0.3 cm worse
+    # (docs/results.md, "Reward encoding"). --no-object-vae segments nothing, so it takes
+    # "single".
     achieved_encoding: str = "held"
     # 10: half the fewest object pixels a visible puck shows anywhere along hurdle_top's
     # corridor (20; 20-55 along it, docs/encoders.md).
