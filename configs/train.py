@@ -231,11 +231,6 @@ def _object_vae(task: str, over) -> VAEConfig:
     return object_vae_config(task, **over)
 
 
-def _default(name: str):
-    """TrainConfig's default for field `name`."""
-    return {f.name: f.default for f in dataclasses.fields(TrainConfig)}[name]
-
-
 def make_config(task: str, algo: str = "roll", preset: str = "paper", **overrides) -> TrainConfig:
     """The config of `task` x `algo` x `preset`; keyword overrides win (nested configs are
     replaced whole: pass e.g. sac=dataclasses.replace(cfg.sac, batch_size=256))."""
@@ -259,7 +254,7 @@ def make_config(task: str, algo: str = "roll", preset: str = "paper", **override
         values["lstm"] = dataclasses.replace(values["lstm"],
                                              out_dim=values["scene_vae"].latent_dim)
     if (not values.get("use_object_vae", True) and "achieved_encoding" not in overrides
-            and values.get("achieved_encoding", _default("achieved_encoding")) == "held"):
+            and values.get("achieved_encoding", TrainConfig.achieved_encoding) == "held"):
         # --no-object-vae segments nothing, so no object pixels are counted: each frame is
         # its own achieved goal ("single"). Asking for "held" with it is refused (validate).
         values["achieved_encoding"] = "single"
