@@ -26,6 +26,9 @@ _PRETRAIN_OCCLUDED_FRACTION = dict(zip(TASKS, (0.3, 0.3, 0.3, 0.0, 0.0)))
 # Not in the paper: the reference code's hurdle object-VAE / LSTM images move the hand out of
 # view (ROLL/generate_LSTM_vae_only_dataset.py); the other tasks' show it.
 _PRETRAIN_HAND = dict(zip(TASKS, ("random", "away", "away", "random", "random")))
+# Not in the paper: pickup's object-VAE / LSTM images are its goal images, the reference code's
+# (pickup-original-dataset.npy); the other tasks' are placements.
+_PRETRAIN_GOAL_SHARE = dict(zip(TASKS, (0.0, 0.0, 0.0, 0.0, 1.0)))
 PRETRAIN_HANDS = ("random", "away")
 
 SCENE_FEATURE_DIM = 576  # "Network Architectures": final encoder feature vector of size 576
@@ -262,6 +265,7 @@ def object_vae_config(task: str, **overrides) -> VAEConfig:
         "kl_reference_batch": 128,  # Table 3: the batch beta was tuned with (see effective_beta)
         "pretrain_occluded_fraction": _PRETRAIN_OCCLUDED_FRACTION[task],  # reference code
         "pretrain_hand": _PRETRAIN_HAND[task],  # reference code
+        "pretrain_goal_share": _PRETRAIN_GOAL_SHARE[task],  # reference code
     }
     return VAEConfig(**{**values, **overrides})
 

@@ -58,6 +58,9 @@ class TaskSpec:
     # None: the task has none.
     hand_away: Vec | None = None
     source: str = ""  # where the numbers come from (the reference code's files)
+    # Raised when the task's numbers change what an image shows (goals, resets, boxes):
+    # encoders pretrained on another revision are refused on load.
+    revision: int = 1
 
     def __post_init__(self):
         check_spec(self)
@@ -209,7 +212,13 @@ TASKS: dict[str, TaskSpec] = {
         hand_goal_low=(0.0, 0.55, 0.07), hand_goal_high=(0.0, 0.65, 0.20),
         object_goal_low=(0.0, 0.55, 0.02), object_goal_high=(0.0, 0.65, 0.15),
         object_reset_low=(0.0, 0.6, 0.02), object_reset_high=(0.0, 0.6, 0.02),
+        revision=2,  # 2: table goals with the hand away from the cube (PICKUP_CLEARANCE)
     ),
 }
 
 PICKUP_AIR_GOAL_FRACTION = 0.75  # appendix: 75% of evaluation goals in the air
+# The other goals put the cube on the table and the hand elsewhere in its box (reference code:
+# multiworld sawyer_pick_and_place.py, generate_uncorrected_env_goals), its grasp point at least
+# this far from the cube's centre, so the open fingers neither touch nor hide it (the drawn
+# sphere's 3.5 cm radius plus the cube's 2 cm half-width, rounded up).
+PICKUP_CLEARANCE = 0.06

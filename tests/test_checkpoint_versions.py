@@ -27,3 +27,11 @@ def test_the_current_version_passes_the_meta_check_and_reaches_the_restore(tmp_p
     with pytest.raises(Exception) as e:
         pretrain.load(str(tmp_path / "encoders"), cfg)
     assert "this code needs" not in str(e.value) and "task numbers" not in str(e.value)
+
+
+def test_encoders_of_an_earlier_task_revision_are_refused_naming_the_task(tmp_path):
+    cfg = make_config("pickup", "roll", "smoke")
+    meta = {k: v for k, v in pretrain._meta(cfg).items() if k != "task_revision"}  # revision 1
+    write_meta(str(tmp_path / "encoders"), meta)
+    with pytest.raises(ValueError, match=r"revision 1 of task 'pickup'.*revision 2.*pretrain"):
+        pretrain.load(str(tmp_path / "encoders"), cfg)

@@ -172,6 +172,35 @@ def test_gripper_lifts_the_object_only_when_closed():
     assert float(traj_open.obj[-1, 2]) < scenes.CUBE_HALF + 0.005
 
 
+def test_pickup_goals_hold_the_cube_in_the_air_or_leave_it_bare_on_the_table():
+    """The reference's goals: 75% the cube held at the claw, the rest on the table with the
+    hand elsewhere in its box, open, neither touching nor hiding it."""
+    env = env_of("pickup")
+    goals = jax.jit(jax.vmap(env.sample_goal))(jax.random.split(jax.random.PRNGKey(0), 128))
+    cube = np.asarray(jax.vmap(env.object_state)(goals))
+    hand = np.asarray(jax.vmap(env.hand_pos)(goals))
+    labels = np.asarray(jax.jit(jax.vmap(lambda s: env.render_both(s)[1]))(goals))
+    pixels = (labels == 2).sum((1, 2))
+    table = cube[:, 2] < scenes.CUBE_HALF + 1e-4
+    assert 0.15 < table.mean() < 0.35  # 25% of the goals
+    grasp = hand - np.array([0.0, 0.0, scenes.GRASP_DROP])
+    gap = np.linalg.norm(grasp - cube, axis=1)
+    assert np.all(gap[~table] < 0.01)  # held at the claw
+    assert np.all(gap[table] >= tasks_mod.PICKUP_CLEARANCE - 1e-4)
+    assert np.ptp(hand[table, 1]) > 0.05 and np.ptp(hand[table, 2]) > 0.05  # spread over the box
+    # A bare cube shows about as many pixels as the cube alone with the hand raised away from
+    # it (+-2 with its place on the pixel grid); the fingers hide part of a held one.
+    bare = env.place(jnp.array([0.0, 0.55, 0.20]), jnp.array([0.0, 0.65, scenes.CUBE_HALF]))
+    alone = int((np.asarray(env.render_both(bare)[1]) == 2).sum())
+    assert pixels[table].min() >= 0.8 * alone
+    assert np.median(pixels[~table]) < 0.8 * alone
+    # Left alone, a table goal stays put: the hand does not touch the cube.
+    open_still = jnp.tile(jnp.array([0.0, 0.0, -1.0]), (5, 1))
+    still = jax.jit(jax.vmap(lambda s: rollout(env, s, open_still)[1].obj[-1]))(
+        jax.tree.map(lambda x: x[np.flatnonzero(table)], goals))
+    assert np.abs(np.asarray(still) - cube[table]).max() < 2e-3
+
+
 # ----------------------------------------------------------------- determinism / vmap
 def test_same_key_same_trajectory_and_different_key_differs():
     env = env_of("hurdle_top")

@@ -234,6 +234,8 @@ def pretrain(cfg: TrainConfig, env, seg_params, key, progress: bool = True,
     n_scene = cfg.scene.n_pretrain_images
     sd_spec = {"task": cfg.task, "n": n_scene, "key": _key(k_sd),
                "source": cfg.scene_pretrain_data}
+    if task_revision(cfg.task) != 1:  # absent at 1: earlier caches stay valid
+        sd_spec["task_revision"] = task_revision(cfg.task)
     data = {}
 
     def scene_data():  # built or loaded once, only when a model is (re)trained on it
@@ -257,6 +259,8 @@ def pretrain(cfg: TrainConfig, env, seg_params, key, progress: bool = True,
         od_spec = {"task": cfg.task, "segmentation": _digest(seg_params), "n": n_obj,
                    "key": _key(k_od), "occluded": [ocfg.pretrain_occluded_fraction,
                                                    ocfg.pretrain_occluded_drop]}
+        if "task_revision" in sd_spec:
+            od_spec["task_revision"] = sd_spec["task_revision"]
         if ocfg.pretrain_goal_share:  # absent at 0: earlier caches of placements stay valid
             od_spec["goal_share"] = ocfg.pretrain_goal_share
         arm_pairs = ocfg.arm_pair_coef > 0
@@ -325,9 +329,18 @@ def recon_grid(params, cfg, images, path: str, n: int = 8) -> None:
     cv2.imwrite(path, grid[..., ::-1])
 
 
+def task_revision(task: str) -> int:
+    """The revision of `task`'s numbers (envs_mjx TaskSpec.revision) its encoders were
+    pretrained on; a checkpoint that records none was made on revision 1."""
+    from envs_mjx.tasks import TASKS
+
+    return TASKS[task].revision
+
+
 def _meta(cfg: TrainConfig) -> dict:
     enc = goal_encoder(cfg)
     return {"version": CHECKPOINT_VERSION, "task": cfg.task, "algo": cfg.algo,
+            "task_revision": task_revision(cfg.task),
                 "image_shape": list(cfg.scene.image_shape), "scene_latent": cfg.scene.latent_dim,
                 "object_latent": None if enc.object_cfg is None else enc.object_cfg.latent_dim,
                 "lstm": enc.lstm,
@@ -387,6 +400,11 @@ def load(path: str, cfg: TrainConfig) -> Pretrained:
             f"per image instead of the reference code's beta / batch (VAEConfig.effective_beta), "
             f"which collapses the object-VAE; pretrain them again")
     want = _meta(cfg)
+    if meta.get("task_revision", 1) != want["task_revision"]:
+        raise ValueError(
+            f"encoder checkpoint {path} was pretrained on revision {meta.get('task_revision', 1)} "
+            f"of task {cfg.task!r}, whose images are now those of revision "
+            f"{want['task_revision']} (envs_mjx/tasks.py, TaskSpec.revision): pretrain them again")
     recorded = {**meta, **meta_decoders(meta)}
     for k in ("task", "image_shape", "scene_latent", "object_latent", "lstm",
               "object_matching_coef", "scene_decoder", "object_decoder"):
