@@ -72,3 +72,32 @@ def test_occlusion_scores_the_empty_image_and_the_lstm_memory():
     holds = diagnose.occlusion(_Encoder(holds=True), None, None, None, path)
     assert holds["memory_last_hidden_frame"] == pytest.approx(1.0, abs=1e-6)
     assert len(holds["memory_per_hidden_frame"]) == diagnose.OCC_HIDDEN
+
+
+def test_pickup_grasp_profile_measures_what_lowering_the_claw_earns():
+    from roll_jax.analysis.diagnose_pickup import grasp_profile
+
+    cube = np.zeros((30, 2))
+    cube[13:, 1] = np.linspace(0.0, 0.12, 17)  # lifted from step 14 on
+    goal = np.array([0.0, 0.12])
+    honest = np.linalg.norm(cube - goal, axis=1)[:, None]  # a latent that is the cube's height
+    res = grasp_profile(honest, np.zeros(1), cube, goal)
+    assert res["spearman"] == pytest.approx(1.0)
+    assert res["lower_share"] == pytest.approx(0.0) and res["close_penalty_share"] == pytest.approx(0.0)
+    hiding = honest.copy()
+    hiding[4:8] -= 0.06  # the open claw over the cube looks half-way lifted, closing undoes it
+    res = grasp_profile(hiding, np.zeros(1), cube, goal)
+    assert res["lower_share"] == pytest.approx(0.5) and res["close_penalty_share"] == pytest.approx(0.5)
+    with pytest.raises(ValueError, match="does not fall"):
+        grasp_profile(honest[::-1], np.zeros(1), cube, goal)
+
+
+def test_pickup_prior_goals_are_matched_to_the_nearest_goal_latent():
+    from roll_jax.analysis.diagnose_pickup import prior_goals
+
+    z_goals = np.array([[0.0], [1.0], [2.0]])
+    cube = np.array([[0.6, 0.02], [0.6, 0.10], [0.6, 0.12]])  # one on the table, two in the air
+    res = prior_goals(np.array([[0.1], [0.9], [2.2], [5.0]]), z_goals, cube)
+    assert res["share_nearest_in_air"] == pytest.approx(0.75)
+    assert res["goal_spacing_median"] == pytest.approx(1.0)
+    assert res["nearest_goal_distance_median"] == pytest.approx(0.15)

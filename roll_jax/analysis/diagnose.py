@@ -2,6 +2,7 @@
 
     roll-analysis diagnose --task hurdle_bottom --run DIR [--out FILE.json] [--png PRIOR.png]
     roll-analysis diagnose --plot before=A.json after=B.json --png PATHS.png
+    roll-analysis diagnose --task pickup --run DIR     (its own measurements: diagnose_pickup.py)
 
 DIR holds segmentation/ and encoders/ (a `roll_jax.encoders.pretrain --out` or a `train.py` run
 directory). Five measurements, each a question a failed learning run raises:
@@ -393,11 +394,14 @@ def main(argv=None):
     p.add_argument("--plot", nargs="+", metavar="LABEL=JSON", default=None,
                    help="instead of measuring: plot (a)'s profiles of written results into "
                         "--png, e.g. --plot before=a.json after=b.json")
-    p.add_argument("--task", choices=sorted(GOALS), help="a push task (required to measure)")
+    p.add_argument("--task", choices=sorted(GOALS) + ["pickup"],
+                   help="a push task, or pickup (roll_jax/analysis/diagnose_pickup.py); "
+                        "required to measure")
     p.add_argument("--run", help="directory with segmentation/ and encoders/ (pretrain --out "
                                  "or a run); required to measure")
     p.add_argument("--out", default=None, help="JSON file to write (default: print only)")
-    p.add_argument("--png", default=None, help="PNG of 32 decoded prior goals")
+    p.add_argument("--png", default=None, help="PNG of 32 decoded prior goals (push tasks); "
+                                               "with --plot, the figure")
     p.add_argument("--seed", type=int, default=0, help="seed of the random draws")
     a = p.parse_args(argv)
     if a.plot:
@@ -410,11 +414,23 @@ def main(argv=None):
                 p.error(f"--plot takes LABEL=JSON, got {item!r}")
             with open(path) as f:
                 results.append((label, json.load(f)))
-        plot_paths(results, a.png)
+        if all("grasp" in r for _, r in results):
+            from roll_jax.analysis.diagnose_pickup import plot_grasps
+
+            plot_grasps(results, a.png)
+        elif any("grasp" in r for _, r in results):
+            p.error("--plot takes either pickup results or push-task results, not both")
+        else:
+            plot_paths(results, a.png)
         return
     if not (a.task and a.run):
         p.error("--task and --run are required to measure")
-    res = diagnose(a.task, a.run, a.seed, a.png)
+    if a.task == "pickup":
+        from roll_jax.analysis.diagnose_pickup import diagnose_pickup
+
+        res = diagnose_pickup(a.run, a.seed)
+    else:
+        res = diagnose(a.task, a.run, a.seed, a.png)
     brief = {k: ({kk: vv for kk, vv in v.items() if kk not in ("profile", "puck_xy")}
                  if isinstance(v, dict) else v) for k, v in res.items()}
     print(json.dumps(brief, indent=1))
