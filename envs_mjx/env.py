@@ -42,7 +42,7 @@ mjx = _import_mjx()
 from envs_mjx import scenes  # noqa: E402
 from envs_mjx.arm import N_ARM_JOINTS, arm_ik  # noqa: E402
 from envs_mjx.render import Camera, Renderer  # noqa: E402
-from envs_mjx.tasks import PICKUP_AIR_GOAL_FRACTION, PICKUP_CLEARANCE, TaskSpec  # noqa: E402
+from envs_mjx.tasks import PICKUP_AIR_GOAL_FRACTION, PICKUP_AIR_Z, PICKUP_CLEARANCE, TaskSpec  # noqa: E402
 
 ACTION_SCALE = 0.02  # metres of mocap motion per unit action (multiworld)
 
@@ -335,7 +335,7 @@ class Env:
         else:
             in_air = jax.random.uniform(k_air) < PICKUP_AIR_GOAL_FRACTION
             on_table = obj.at[2].set(scenes.CUBE_HALF)
-            air = obj.at[2].set(jnp.maximum(obj[2], scenes.CUBE_HALF + 0.02))
+            air = obj.at[2].set(jnp.maximum(obj[2], PICKUP_AIR_Z))
             obj = jnp.where(in_air, air, on_table)
             held = jnp.clip(obj + jnp.array([0.0, 0.0, scenes.GRASP_DROP]), self._hand_low,
                             self._hand_high)
@@ -344,25 +344,27 @@ class Env:
         obj_q = self._object_qpos(obj) if self.with_object else None
         return EnvState(data=self._build(hand, obj_q, finger_q), t=jnp.zeros((), jnp.int32))
 
-    def _push_goal_hand(self, key, puck):
-        """Hand uniform in the hand goal box, first of 16 draws not touching the puck."""
+    def _clear_goal_hand(self, key, clear):
+        """The first of 16 hand positions uniform in the hand goal box for which `clear`
+        (positions [16, k] -> bool [16]) holds (the first draw if none does)."""
         s = self.spec
-        xy = jax.vmap(lambda k: _uniform(k, s.hand_goal_low, s.hand_goal_high))(
+        hand = jax.vmap(lambda k: _uniform(k, s.hand_goal_low, s.hand_goal_high))(
             jax.random.split(key, 16))
-        clear = jnp.linalg.norm(xy - puck, axis=-1) > scenes.PUCK_RADIUS + 0.02
-        xy = xy[jnp.argmax(clear)]
+        return hand[jnp.argmax(clear(hand))]
+
+    def _push_goal_hand(self, key, puck):
+        """Hand uniform in the hand goal box, not touching the puck."""
+        xy = self._clear_goal_hand(
+            key, lambda xy: jnp.linalg.norm(xy - puck, axis=-1) > scenes.PUCK_RADIUS + 0.02)
         return jnp.concatenate([xy, jnp.array([scenes.HAND_Z_PUSH])])
 
     def _pickup_away_hand(self, key, cube):
         """A table goal's hand (the reference's `generate_uncorrected_env_goals`: the cube on
-        the table, the hand uniform in its goal box): first of 16 draws whose grasp point is
-        at least PICKUP_CLEARANCE from the cube's centre, fingers open."""
-        s = self.spec
-        hand = jax.vmap(lambda k: _uniform(k, s.hand_goal_low, s.hand_goal_high))(
-            jax.random.split(key, 16))
-        grasp = hand - jnp.array([0.0, 0.0, scenes.GRASP_DROP])
-        clear = jnp.linalg.norm(grasp - cube, axis=-1) >= PICKUP_CLEARANCE
-        return hand[jnp.argmax(clear)]
+        the table, the hand uniform in its goal box), its grasp point at least
+        PICKUP_CLEARANCE from the cube's centre; the caller opens the fingers."""
+        drop = jnp.array([0.0, 0.0, scenes.GRASP_DROP])
+        return self._clear_goal_hand(
+            key, lambda hand: jnp.linalg.norm(hand - drop - cube, axis=-1) >= PICKUP_CLEARANCE)
 
     def _door_goal_hand(self, angle):
         """Hook in the handle's gap for that door angle (how the door is held open)."""

@@ -217,6 +217,7 @@ TASKS: dict[str, TaskSpec] = {
 }
 
 PICKUP_AIR_GOAL_FRACTION = 0.75  # appendix: 75% of evaluation goals in the air
+PICKUP_AIR_Z = 0.04  # m: an air goal's cube centre is at least this high (2 cm off the table)
 # The other goals put the cube on the table and the hand elsewhere in its box (reference code:
 # multiworld sawyer_pick_and_place.py, generate_uncorrected_env_goals), its grasp point at least
 # this far from the cube's centre, so the open fingers neither touch nor hide it (the drawn

@@ -81,15 +81,15 @@ def test_pickup_grasp_profile_measures_what_lowering_the_claw_earns():
     cube[13:, 1] = np.linspace(0.0, 0.12, 17)  # lifted from step 14 on
     goal = np.array([0.0, 0.12])
     honest = np.linalg.norm(cube - goal, axis=1)[:, None]  # a latent that is the cube's height
-    res = grasp_profile(honest, np.zeros(1), cube, goal)
+    res = grasp_profile(honest, np.zeros(1), cube, goal, first_close=8)
     assert res["spearman"] == pytest.approx(1.0)
     assert res["lower_share"] == pytest.approx(0.0) and res["close_penalty_share"] == pytest.approx(0.0)
     hiding = honest.copy()
     hiding[4:8] -= 0.06  # the open claw over the cube looks half-way lifted, closing undoes it
-    res = grasp_profile(hiding, np.zeros(1), cube, goal)
+    res = grasp_profile(hiding, np.zeros(1), cube, goal, first_close=8)
     assert res["lower_share"] == pytest.approx(0.5) and res["close_penalty_share"] == pytest.approx(0.5)
     with pytest.raises(ValueError, match="does not fall"):
-        grasp_profile(honest[::-1], np.zeros(1), cube, goal)
+        grasp_profile(honest[::-1], np.zeros(1), cube, goal, first_close=8)
 
 
 def test_pickup_prior_goals_are_matched_to_the_nearest_goal_latent():
@@ -101,3 +101,14 @@ def test_pickup_prior_goals_are_matched_to_the_nearest_goal_latent():
     assert res["share_nearest_in_air"] == pytest.approx(0.75)
     assert res["goal_spacing_median"] == pytest.approx(1.0)
     assert res["nearest_goal_distance_median"] == pytest.approx(0.15)
+
+
+def test_pickup_grasp_phases_are_read_from_the_actions():
+    from roll_jax.analysis.diagnose_pickup import grasp_phases
+
+    actions = np.zeros((20, 3))
+    actions[:5, 2] = -1.0  # open while lowering
+    actions[5:, 2] = 1.0  # closes from step 5
+    actions[:5, 1] = -1.0  # down, then still, then up from step 9
+    actions[9:, 1] = 1.0
+    assert grasp_phases(actions) == (5, 9)

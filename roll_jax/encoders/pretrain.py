@@ -234,8 +234,9 @@ def pretrain(cfg: TrainConfig, env, seg_params, key, progress: bool = True,
     n_scene = cfg.scene.n_pretrain_images
     sd_spec = {"task": cfg.task, "n": n_scene, "key": _key(k_sd),
                "source": cfg.scene_pretrain_data}
-    if task_revision(cfg.task) != 1:  # absent at 1: earlier caches stay valid
-        sd_spec["task_revision"] = task_revision(cfg.task)
+    revision = task_revision(cfg.task)
+    if revision != 1:  # absent at 1: earlier caches stay valid
+        sd_spec["task_revision"] = revision
     data = {}
 
     def scene_data():  # built or loaded once, only when a model is (re)trained on it
@@ -259,8 +260,8 @@ def pretrain(cfg: TrainConfig, env, seg_params, key, progress: bool = True,
         od_spec = {"task": cfg.task, "segmentation": _digest(seg_params), "n": n_obj,
                    "key": _key(k_od), "occluded": [ocfg.pretrain_occluded_fraction,
                                                    ocfg.pretrain_occluded_drop]}
-        if "task_revision" in sd_spec:
-            od_spec["task_revision"] = sd_spec["task_revision"]
+        if revision != 1:  # likewise
+            od_spec["task_revision"] = revision
         if ocfg.pretrain_goal_share:  # absent at 0: earlier caches of placements stay valid
             od_spec["goal_share"] = ocfg.pretrain_goal_share
         arm_pairs = ocfg.arm_pair_coef > 0
@@ -340,7 +341,7 @@ def task_revision(task: str) -> int:
 def _meta(cfg: TrainConfig) -> dict:
     enc = goal_encoder(cfg)
     return {"version": CHECKPOINT_VERSION, "task": cfg.task, "algo": cfg.algo,
-            "task_revision": task_revision(cfg.task),
+                "task_revision": task_revision(cfg.task),
                 "image_shape": list(cfg.scene.image_shape), "scene_latent": cfg.scene.latent_dim,
                 "object_latent": None if enc.object_cfg is None else enc.object_cfg.latent_dim,
                 "lstm": enc.lstm,
