@@ -94,3 +94,46 @@ def test_compare_pairs_every_further_run_with_the_first(tmp_path, capsys):
         with pytest.raises(SystemExit):
             compare.main(bad)
         assert msg in capsys.readouterr().err
+
+
+def test_figure4_pairs_each_cell_with_roll_up_to_their_common_evaluations(tmp_path, capsys):
+    """roll-analysis figure4: per-cell medians over seeds at the last evaluation, a
+    Skew-Fit cell that stopped early paired with ROLL on the evaluations both have, a panel
+    per task in the figure; a cell of another task or a missing file is refused by name."""
+    import json
+
+    from roll_jax.analysis import figure4
+
+    def write(name, dist):  # dist[eval][seed]
+        from roll_jax.training import run_dir
+
+        path = tmp_path / f"{name}.csv"
+        run_dir.append_rows(str(path), [dict(r, start_distance=0.1) for r in _rows(dist)])
+        return str(path)
+
+    roll = write("roll", [[0.10, 0.12, 0.11], [0.06, 0.05, 0.07], [0.03, 0.04, 0.02]])
+    skew = write("skew", [[0.10, 0.12, 0.11], [0.09, 0.08, 0.10]])  # two evaluations only
+    door = write("door", [[0.4, 0.4, 0.4], [0.2, 0.3, 0.1]])
+    runs = _finished_runs(tmp_path, {"pp": 0.0})
+    png, out = tmp_path / "f4.png", tmp_path / "f4.json"
+    assert figure4.main(["--cell", "puck_push", "roll", roll, "--cell", "puck_push", "skewfit",
+                         skew, "--cell", "door_open", "roll", door, "--png", str(png),
+                         "--out", str(out)]) == 0
+    assert png.stat().st_size > 10_000
+    res = json.loads(out.read_text())["tasks"]
+    assert res["puck_push"]["cells"]["roll"]["median"] == pytest.approx(0.03)
+    assert res["puck_push"]["cells"]["roll"]["env_steps"] == 2000
+    assert res["door_open"]["cells"]["roll"]["median"] == pytest.approx(0.2)
+    pair = res["puck_push"]["paired_with_roll"]["skewfit"]
+    assert pair["to_steps"] == 1000 and pair["n_evaluations"] == 2
+    assert pair["paired_diff_mean"] == pytest.approx(np.mean([0, 0, 0, -0.03, -0.03, -0.03]))
+    assert pair["evaluations_a_below_b"] == 1
+    assert res["door_open"]["paired_with_roll"] == {}
+    # a run directory is checked against the cell it is given as
+    with pytest.raises(SystemExit):
+        figure4.main(["--cell", "hurdle_top", "roll", runs[0], "--png", str(png)])
+    assert "is a puck_push / roll run, not hurdle_top / roll" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        figure4.main(["--cell", "puck_push", "roll", str(tmp_path / "nope.csv"), "--png",
+                      str(png)])
+    assert "nope.csv: no such run directory or metrics.csv" in capsys.readouterr().err

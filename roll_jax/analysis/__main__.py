@@ -6,6 +6,7 @@
     roll-analysis diagnose --task TASK --run DIR [--out FILE]      (a push task's encoders)
     roll-analysis compare RUN_A RUN_B [--n-goals N]                (paired runs; roll-compare)
     roll-analysis policy-panel --evals OUT_A OUT_B --labels A B --out PNG
+    roll-analysis figure4 --cell TASK ALGO RUN [--cell ...] --png PNG  (Fig. 4 from any cells)
 
 (`python -m roll_jax.analysis CMD ...` is the same.) `latent-vs-distance` and `occlusion`
 analyse pretrained encoders: DIR = `roll-pretrain --task TASK --out DIR` (DIR/segmentation,
@@ -30,11 +31,13 @@ import sys
 DELEGATED = {"reward-probe": ("roll_jax.analysis.reward_probe", "main"),
              "diagnose": ("roll_jax.analysis.diagnose", "main"),
              "compare": ("roll_jax.analysis.compare", "main"),
-             "policy-panel": ("roll_jax.analysis.compare", "panel_main")}
+             "policy-panel": ("roll_jax.analysis.compare", "panel_main"),
+             "figure4": ("roll_jax.analysis.figure4", "main")}
 HELP = {"reward-probe": "what runs' reward encoders measure: object vs hand distance",
         "diagnose": "a push task's encoders, reset and prior goals, before tuning",
         "compare": "two runs paired: learning curves, final policies on shared goals",
-        "policy-panel": "goal images and each run's final frames from roll-evaluate outputs"}
+        "policy-panel": "goal images and each run's final frames from roll-evaluate outputs",
+        "figure4": "paper Figure 4 and paired ROLL differences from cells run anywhere"}
 
 
 def make_parser() -> argparse.ArgumentParser:

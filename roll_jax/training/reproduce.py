@@ -55,6 +55,9 @@ ABLATIONS = ("roll", "roll_no_matching_loss", "roll_no_lstm", "roll_no_object_va
 LABELS = {"roll": "ROLL", "skewfit": "Skew-Fit", "roll_no_matching_loss": "ROLL, no matching loss",
           "roll_no_lstm": "ROLL, no LSTM", "roll_no_object_vae": "ROLL, no object-VAE",
           "oracle": "state oracle"}
+# one colour per variant in every panel
+COLORS = {"roll": "C0", "skewfit": "C1", "oracle": "C2", "roll_no_matching_loss": "C3",
+          "roll_no_lstm": "C4", "roll_no_object_vae": "C5"}
 # Fields the grid sets itself; a --set of them would contradict it.
 GRID_FIELDS = ("task", "algo", "preset", "seeds", "matching_loss", "use_lstm", "use_object_vae")
 METRIC = "final_distance"
@@ -394,7 +397,8 @@ def figure4(curves: dict[str, dict[str, list[dict]]], path: str) -> None:
     for ax, (task, by_algo) in zip(axes, curves.items()):
         for variant, rows in by_algo.items():
             if rows:
-                plots.plot_median_band(ax, rows, LABELS.get(variant, variant))
+                plots.plot_median_band(ax, rows, LABELS.get(variant, variant),
+                                       color=COLORS.get(variant))
         if not any(by_algo.values()):
             ax.text(0.5, 0.5, "no results yet", ha="center", va="center", transform=ax.transAxes)
         ax.set_title(task)
@@ -409,7 +413,8 @@ def ablation_figure(by_variant: dict[str, list[dict]], path: str) -> None:
     plt, fig, (ax,) = _panels(1)
     for variant, rows in by_variant.items():
         if rows:
-            plots.plot_median_band(ax, rows, LABELS.get(variant, variant))
+            plots.plot_median_band(ax, rows, LABELS.get(variant, variant),
+                                   color=COLORS.get(variant))
     ax.set_title(f"ablations on {ABLATION_TASK} (median, 25-75%)")
     ax.legend(fontsize=7)
     fig.tight_layout()
