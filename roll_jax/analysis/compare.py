@@ -105,6 +105,14 @@ def final_policies(runs: list[str], n_goals: int, seed: int) -> dict:
             "a_minus_b": difference(finals[0], finals[1])}
 
 
+def write_json(path: str, obj) -> None:
+    """`obj` as indented JSON at `path` (its directory made), and say so."""
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    with open(path, "w") as f:
+        json.dump(obj, f, indent=2)
+    print(f"wrote {path}")
+
+
 def _print_pair(pair: dict, from_steps: int) -> None:
     for s, x, y in zip(pair["env_steps"], pair["median_a"], pair["median_b"]):
         print(f"env steps {s:7d}: A {x * 100:5.2f} cm  B {y * 100:5.2f} cm")
@@ -184,10 +192,7 @@ def main(argv=None) -> int:
               f"{d['mean_a_minus_b_cm']:+.2f} +- {d['standard_error_cm']:.2f} cm (median "
               f"{d['median_a_minus_b_cm']:+.2f}; A closer in {d['share_a_closer']:.0%})")
     if a.out:
-        os.makedirs(os.path.dirname(os.path.abspath(a.out)), exist_ok=True)
-        with open(a.out, "w") as f:
-            json.dump(out, f, indent=2)
-        print(f"wrote {a.out}")
+        write_json(a.out, out)
     if a.plot:
         os.makedirs(os.path.dirname(os.path.abspath(a.plot)), exist_ok=True)
         last = pairs[0]["env_steps"][-1]

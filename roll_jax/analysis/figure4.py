@@ -20,7 +20,7 @@ import argparse
 import json
 import os
 
-from roll_jax.analysis.compare import compare
+from roll_jax.analysis.compare import compare, write_json
 from roll_jax.training import reproduce, run_dir
 
 REFERENCE = "roll"
@@ -118,9 +118,6 @@ def main(argv=None) -> int:
                   f"{pair['paired_diff_sem'] * 100:.2f} cm paired to {pair['to_steps']}, "
                   f"ROLL below in {pair['evaluations_a_below_b']}/{pair['n_evaluations']}")
     if a.out:
-        os.makedirs(os.path.dirname(os.path.abspath(a.out)), exist_ok=True)
-        with open(a.out, "w") as f:
-            json.dump({"cells": {f"{t} {v}": path for t, v, path in a.cell},
-                       "from_steps": a.from_steps, "tasks": summary}, f, indent=2)
-        print(f"wrote {a.out}")
+        write_json(a.out, {"cells": {f"{t} {v}": path for t, v, path in a.cell},
+                           "from_steps": a.from_steps, "tasks": summary})
     return 0
