@@ -24,6 +24,13 @@ from roll_jax.analysis.compare import compare, write_json
 from roll_jax.training import reproduce, run_dir
 
 REFERENCE = "roll"
+# How the printed summary shows a task's final distance (the metrics are in m, the door's in rad).
+UNITS = {"door_open": ("rad", 1.0)}
+
+
+def _fmt(task: str, x: float, sign: str = "") -> str:
+    unit, scale = UNITS.get(task, ("cm", 100.0))
+    return f"{x * scale:{sign}.3f} {unit}" if unit == "rad" else f"{x * scale:{sign}.2f} {unit}"
 
 
 def read_cell(task: str, variant: str, path: str) -> tuple[list[dict], int | None]:
@@ -112,10 +119,10 @@ def main(argv=None) -> int:
     for task, entry in summary.items():
         for variant, s in entry["cells"].items():
             print(f"{task:14s} {variant:22s} {s['env_steps']:6d} steps: median "
-                  f"{s['median'] * 100:5.2f} cm ({s['q25'] * 100:.2f}-{s['q75'] * 100:.2f})")
+                  f"{_fmt(task, s['median'])} ({_fmt(task, s['q25'])} - {_fmt(task, s['q75'])})")
         for variant, pair in entry["paired_with_roll"].items():
-            print(f"{task:14s} ROLL - {variant}: {pair['paired_diff_mean'] * 100:+.2f} +- "
-                  f"{pair['paired_diff_sem'] * 100:.2f} cm paired to {pair['to_steps']}, "
+            print(f"{task:14s} ROLL - {variant}: {_fmt(task, pair['paired_diff_mean'], '+')} +- "
+                  f"{_fmt(task, pair['paired_diff_sem'])} paired to {pair['to_steps']}, "
                   f"ROLL below in {pair['evaluations_a_below_b']}/{pair['n_evaluations']}")
     if a.out:
         write_json(a.out, {"cells": {f"{t} {v}": path for t, v, path in a.cell},
