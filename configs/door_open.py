@@ -6,4 +6,6 @@ TRAIN = {
     "skew_alpha": -0.5,  # Table 2: Skew-Fit alpha for the scene-VAE
     "vae_schedule": "custom_schedule",  # Skew-Fit appendix C.5 (rlkit vae_schedules)
     "n_envs": 5,  # ours: 5 envs x 100 steps = one 500-step epoch
+    # reference code (launch_ROLL_sawyerdoor.py, door_original_dataset.npy): goal images
+    "scene_pretrain_data": "goals",
 }

@@ -26,10 +26,10 @@ _PRETRAIN_OCCLUDED_FRACTION = dict(zip(TASKS, (0.3, 0.3, 0.3, 0.0, 0.0)))
 # Not in the paper: the reference code's hurdle object-VAE / LSTM images move the hand out of
 # view (ROLL/generate_LSTM_vae_only_dataset.py); the other tasks' show it.
 _PRETRAIN_HAND = dict(zip(TASKS, ("random", "away", "away", "random", "random")))
-# Not in the paper: puck_push's and pickup's object-VAE / LSTM images are their goal images,
-# the reference code's (set-to-goal data; pickup-original-dataset.npy); the hurdles' and the
-# door's are placements.
-_PRETRAIN_GOAL_SHARE = dict(zip(TASKS, (1.0, 0.0, 0.0, 0.0, 1.0)))
+# Not in the paper: puck_push's, the door's and pickup's object-VAE / LSTM images are their
+# goal images, the reference code's (set-to-goal data; door_original_dataset.npy,
+# pickup-original-dataset.npy); the hurdles' are placements over the corridor.
+_PRETRAIN_GOAL_SHARE = dict(zip(TASKS, (1.0, 0.0, 0.0, 1.0, 1.0)))
 PRETRAIN_HANDS = ("random", "away")
 
 SCENE_FEATURE_DIM = 576  # "Network Architectures": final encoder feature vector of size 576

@@ -224,7 +224,7 @@ class Env:
 
     def step(self, state: EnvState, action) -> EnvState:
         """Move the mocap target by 0.02 * clip(a, -1, 1) (clipped to the hand box), then
-        simulate 0.1 s."""
+        simulate the task's n_substeps (0.1 s; the door 0.15 s)."""
         self.check_action(action)
         a = jnp.clip(jnp.asarray(action, jnp.float32), -1.0, 1.0)
         d = state.data
@@ -233,7 +233,7 @@ class Env:
         d = d.replace(mocap_pos=mocap[None])
         if self._fingers:
             d = d.replace(ctrl=jnp.full((2,), finger_target(a[2])))
-        d = jax.lax.fori_loop(0, scenes.N_SUBSTEPS, lambda _, x: mjx.step(self.mjx_model, x), d)
+        d = jax.lax.fori_loop(0, self.spec.n_substeps, lambda _, x: mjx.step(self.mjx_model, x), d)
         # Positions after the last substep (mjx.step leaves xpos one substep stale), so that
         # render, labels and object_state agree.
         d = mjx.kinematics(self.mjx_model, d)

@@ -168,6 +168,8 @@ class RollGoalEnv(_GoalReward, gymnasium.Env):
         _check_render_mode(render_mode)
         self._env = _load(task, obs_type, config)
         self.task = self._env.task
+        # real time: 10 frames per second, the door's 0.15 s steps 6.67
+        self.metadata = {**self.metadata, "render_fps": 1.0 / self._env.dt}
         self.obs_type = obs_type
         self.render_mode = render_mode
         self.observation_space = goal_spaces(self._env)
@@ -224,6 +226,8 @@ class RollGoalVectorEnv(_GoalReward, VectorEnv):
         _check_render_mode(render_mode)
         self._env = _load(task, obs_type, config)
         self.task = self._env.task
+        # real time: 10 frames per second, the door's 0.15 s steps 6.67
+        self.metadata = {**self.metadata, "render_fps": 1.0 / self._env.dt}
         self.obs_type = obs_type
         self.num_envs = int(num_envs)
         self.render_mode = render_mode

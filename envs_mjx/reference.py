@@ -9,7 +9,6 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from envs_mjx import scenes
 from envs_mjx.env import ACTION_SCALE, Env, EnvState, finger_target
 
 
@@ -34,7 +33,7 @@ class CReference:
         self.d.mocap_pos[0] = np.clip(self.d.mocap_pos[0] + delta, self._low, self._high)
         if self.env.spec.kind == "pickup":
             self.d.ctrl[:] = finger_target(a[2])
-        for _ in range(scenes.N_SUBSTEPS):
+        for _ in range(self.env.spec.n_substeps):
             mujoco.mj_step(self.m, self.d)
 
     def object_state(self) -> np.ndarray:

@@ -35,11 +35,10 @@ def task_name(name: str) -> str:
 
 
 def get_default_config(name: str):
-    """The default `envs_mjx.standard.Config` of an environment (the same for all five)."""
-    task_name(name)
-    from envs_mjx.standard import Config
+    """The default `envs_mjx.standard.Config` of an environment (its ctrl_dt is the task's)."""
+    from envs_mjx.standard import make_config
 
-    return Config()
+    return make_config(task=task_name(name))
 
 
 def load(name: str, config=None, config_overrides: Mapping[str, Any] | None = None,
@@ -60,7 +59,7 @@ def load(name: str, config=None, config_overrides: Mapping[str, Any] | None = No
         merged.update(dict(config))
     merged.update(config_overrides or {})
     merged.update(overrides)
-    cfg = make_config(merged)
+    cfg = make_config(merged, task=task)
     return _load(task, cfg)
 
 

@@ -14,9 +14,9 @@ import math
 
 from envs_mjx.arm import ROBOT_DARK, ROBOT_GREY, WELD_XML, arm_xml
 
-# One env step = 0.1 s (multiworld: 2 ms x 50). We use 10 ms x 10 substeps: the weld and
-# contacts use solref 0.02 (>= 2 timesteps, MuJoCo's stability floor), and the C-MuJoCo
-# parity test/benchmark checks the outcome on the same model.
+# One env step = 0.1 s (multiworld: 2 ms x 50; the door 3 ms x 50 = 0.15 s, TaskSpec.n_substeps).
+# We use 10 ms substeps: the weld and contacts use solref 0.02 (>= 2 timesteps, MuJoCo's
+# stability floor), and the C-MuJoCo parity test/benchmark checks the outcome on the same model.
 TIMESTEP = 0.01
 N_SUBSTEPS = 10
 
@@ -75,6 +75,13 @@ DOOR_HANDLE_R = 0.2
 DOOR_BAR_Y = -0.07  # handle bar centre, door frame; the hook works in the gap behind it
 DOOR_HOOK_Y = -0.055  # hand y (door frame) when the hook stem rests on the bar's back face
 DOOR_MAX_ANGLE = 1.0472
+# The reference's door (sawyer_door_pull_hook.xml): hinge damping 0.1, no friction loss, no
+# armature, and a 0.4 x 0.4 x 0.02 m panel with its frame and handle at default density:
+# 4.0 kg, 0.244 kg m^2 about the hinge, so a released door coasts (time constant 2.4 s).
+# Our panel is smaller (it must stay inside the hand box's reach), so its inertia is given.
+DOOR_MASS = 4.0
+DOOR_HINGE_INERTIA = 0.244
+DOOR_DAMPING = 0.1
 
 # Pickup: cube half-size, visual sphere radius, grasp point below the hand frame.
 CUBE_HALF = 0.02
@@ -195,10 +202,11 @@ def door_xml(with_object: bool = True) -> str:
     pairs = ""
     if with_object:
         r = DOOR_HANDLE_R
+        izz = DOOR_HINGE_INERTIA - DOOR_MASS * 0.125 ** 2  # about the centre of mass
         xml += f"""
     <body name="door" pos="{DOOR_HINGE_X} {DOOR_Y} 0">
-      <joint name="door_hinge" type="hinge" axis="0 0 1" range="0 {math.degrees(DOOR_MAX_ANGLE)}" damping="1.0" frictionloss="0.05" armature="0.01"/>
-      <inertial pos="-0.125 0 0.12" mass="0.5" diaginertia="0.005 0.005 0.005"/>
+      <joint name="door_hinge" type="hinge" axis="0 0 1" range="0 {math.degrees(DOOR_MAX_ANGLE)}" damping="{DOOR_DAMPING}" armature="0"/>
+      <inertial pos="-0.125 0 0.12" mass="{DOOR_MASS}" diaginertia="{izz} {izz} {izz}"/>
       <geom name="door_panel" type="box" pos="-0.125 0 0.12" size="0.125 0.01 0.12" rgba="{DOOR_RGBA}" {_NOCOL}/>
       <geom name="handle_bar" type="box" pos="{-r} {DOOR_BAR_Y} 0.10" size="0.06 0.008 0.01" rgba="{PUCK_RGBA}" {_NOCOL}/>
       <geom name="handle_post_a" type="box" pos="{-r + 0.055} {DOOR_BAR_Y / 2} 0.10" size="0.005 {-DOOR_BAR_Y / 2 - 0.01} 0.01" rgba="{PUCK_RGBA}" {_NOCOL}/>

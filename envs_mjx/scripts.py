@@ -32,9 +32,17 @@ def hurdle_top_forward(n_steps: int = 30) -> np.ndarray:
     return _seq(([0.0, 1.0], 9), ([-1.0, 0.0], 3), ([0.0, -1.0], 6), ([0.0, 0.0], n_steps - 18))
 
 
-def door_pull(n_steps: int = 30) -> np.ndarray:
-    """door_open: lower the hook behind the handle bar, then pull it along the door's arc."""
-    return _seq(([0.0, 0.0, -1.0], 6), ([0.3, -1.0, 0.0], 4), ([0.8, -1.0, 0.0], n_steps - 10))
+# door_open: from the reset (0, 0.45, 0.1), up and left to (-0.05, 0.45, 0.226), then on to
+# (-0.05, 0.645, 0.226), above the gap behind the handle bar (the stem 5 mm clear of it).
+DOOR_APPROACH = (([-0.36, 0.0, 0.9], 7), ([0.0, 0.975, 0.0], 10))
+
+
+def door_pull(n_steps: int = 40) -> np.ndarray:
+    """door_open: rise above the handle bar and move over its gap (`DOOR_APPROACH`, 17 steps),
+    lower the hook behind the bar, pull it along the door's arc, then hold still (the hook
+    in the gap between bar and panel stops the coasting door)."""
+    return _seq(*DOOR_APPROACH, ([0.0, 0.0, -1.0], 6), ([0.3, -1.0, 0.0], 4),
+                ([0.8, -1.0, 0.0], 4), ([0.0, 0.0, 0.0], n_steps - 31))
 
 
 def pickup_lift(n_steps: int = 30) -> np.ndarray:

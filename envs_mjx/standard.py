@@ -110,16 +110,24 @@ class Config:
     image_size: int = 48  # pixels: square render size
     episode_length: int | None = None  # None: the task's horizon (50; door_open 100)
     done_at_horizon: bool = True  # False: never done (a wrapper such as Brax's truncates)
-    ctrl_dt: float = scenes.N_SUBSTEPS * scenes.TIMESTEP  # fixed by the scene
+    # Fixed by the scene: None, or the task's n_substeps x TIMESTEP (0.1 s; door_open 0.15 s).
+    ctrl_dt: float | None = None
     sim_dt: float = scenes.TIMESTEP  # fixed by the scene
 
 
 CONFIG_FIELDS = tuple(f.name for f in dataclasses.fields(Config))
 
 
-def make_config(overrides: Mapping[str, Any] | None = None) -> Config:
+def task_ctrl_dt(task: str) -> float:
+    """Seconds per env step of `task`: its n_substeps x scenes.TIMESTEP."""
+    from envs_mjx.tasks import TASKS
+
+    return TASKS[task].n_substeps * scenes.TIMESTEP
+
+
+def make_config(overrides: Mapping[str, Any] | None = None, task: str | None = None) -> Config:
     """A checked Config: an unknown field, a wrong obs_type or size names the value and the
-    valid choices."""
+    valid choices. With `task`, ctrl_dt becomes the task's (a different one is refused)."""
     overrides = dict(overrides or {})
     unknown = sorted(set(overrides) - set(CONFIG_FIELDS))
     if unknown:
@@ -135,12 +143,15 @@ def make_config(overrides: Mapping[str, Any] | None = None) -> Config:
             not isinstance(cfg.episode_length, (int, np.integer)) or cfg.episode_length <= 0):
         raise ValueError(f"episode_length must be a positive int or None, got "
                          f"{cfg.episode_length!r}")
-    default = Config()
-    for name in ("ctrl_dt", "sim_dt"):
-        if not math.isclose(getattr(cfg, name), getattr(default, name)):
-            raise ValueError(f"{name} is fixed by the scene ({getattr(default, name)}), got "
-                             f"{getattr(cfg, name)!r}")
-    return cfg
+    if not math.isclose(cfg.sim_dt, scenes.TIMESTEP):
+        raise ValueError(f"sim_dt is fixed by the scene ({scenes.TIMESTEP}), got {cfg.sim_dt!r}")
+    if task is None:
+        return cfg
+    dt = task_ctrl_dt(task)
+    if cfg.ctrl_dt is not None and not math.isclose(cfg.ctrl_dt, dt):
+        raise ValueError(f"ctrl_dt is fixed by the scene of {task!r} ({dt:g}), got "
+                         f"{cfg.ctrl_dt!r}")
+    return dataclasses.replace(cfg, ctrl_dt=dt)
 
 
 class RollEnv(_Base):
@@ -148,8 +159,9 @@ class RollEnv(_Base):
     them (`jax.jit(jax.vmap(env.step))`)."""
 
     def __init__(self, base: Env, config: Config | Mapping[str, Any] | None = None):
-        if not isinstance(config, Config):
-            config = make_config(config)
+        if isinstance(config, Config):
+            config = dataclasses.asdict(config)
+        config = make_config(config, task=base.name)
         self.config = config
         if HAVE_PLAYGROUND:
             super().__init__(_config_dict.ConfigDict(dataclasses.asdict(config)))

@@ -9,7 +9,13 @@ from __future__ import annotations
 import dataclasses
 
 from envs_mjx.render import Camera
-from envs_mjx.scenes import HAND_Z_PUSH, MIDDLE_WALL, OUTER_WALLS, PUCK_RADIUS
+from envs_mjx.scenes import (
+    HAND_Z_PUSH,
+    MIDDLE_WALL,
+    N_SUBSTEPS,
+    OUTER_WALLS,
+    PUCK_RADIUS,
+)
 
 Vec = tuple[float, ...]
 
@@ -51,6 +57,9 @@ class TaskSpec:
     object_reset_low: Vec  # the object is reset uniformly in this box (low == high: fixed)
     object_reset_high: Vec
     reset_free: bool = False
+    # One env step simulates n_substeps x scenes.TIMESTEP: 0.1 s (multiworld's pushes and
+    # pickup, 2 ms x 50); the door's env simulates 0.15 s (3 ms x 50).
+    n_substeps: int = N_SUBSTEPS
     # Where the object can be, as boxes drawn with equal probability (pretraining data, the
     # Fig. 5 observations, scene latents' probes); None: the goal space.
     object_region: tuple[Box, ...] | None = None
@@ -91,6 +100,9 @@ def _inside(p, low, high, tol: float = 1e-9) -> bool:
 
 def check_spec(s: TaskSpec) -> None:
     """Refuse a task whose numbers cannot work, naming the task and the values."""
+    if not isinstance(s.n_substeps, int) or s.n_substeps <= 0:
+        raise ValueError(f"task {s.name!r}: n_substeps must be a positive int, got "
+                         f"{s.n_substeps!r}")
     if not _inside(s.hand_reset, s.hand_low, s.hand_high):
         raise ValueError(f"task {s.name!r}: hand reset {s.hand_reset} lies outside its hand box "
                          f"{s.hand_low}..{s.hand_high}")
@@ -136,6 +148,9 @@ def check_spec(s: TaskSpec) -> None:
 # along x just clear of the puck where it would start inside it (docs/scenes.md).
 _PUSH_Z = HAND_Z_PUSH
 _HAND_AWAY = (-0.2, 0.2, HAND_Z_PUSH)  # the reference's object-only images: hand out of view
+_DOOR_HAND_LOW, _DOOR_HAND_HIGH = (-0.1, 0.45, 0.1), (0.05, 0.65, 0.25)
+# The origin clipped into the door's hand box (see door_open below).
+DOOR_HAND_RESET = tuple(min(max(0.0, lo), hi) for lo, hi in zip(_DOOR_HAND_LOW, _DOOR_HAND_HIGH))
 
 # The reference's corridor samplers (ROLL/generate_vae_dataset.py,
 # _generate_sawyerhurdle_dataset / _generate_sawyerhurdlemiddle_dataset): a third of the
@@ -194,13 +209,21 @@ TASKS: dict[str, TaskSpec] = {
                "sawyer_xyz/sawyer_push_hurdle.py INIT_HAND_POS, init_block_low/high; "
                "ROLL/generate_vae_dataset.py _generate_sawyerhurdle_dataset",
     ),
+    # door_open: the reference's env is reset-free from construction, so its reset never
+    # runs and the mocap target starts at the origin, clipped into the hand box by the first
+    # step; the appendix's "hand initial (-0.05, 0.635, 0.225)" (right above the handle) is
+    # not what the registered env does.
     "door_open": TaskSpec(
         name="door_open", kind="door", action_size=3, horizon=100, camera=DOOR_CAMERA,
-        hand_low=(-0.1, 0.45, 0.1), hand_high=(0.05, 0.65, 0.25), hand_reset=(-0.05, 0.635, 0.225),
-        hand_goal_low=(-0.1, 0.45, 0.1), hand_goal_high=(0.05, 0.65, 0.25),
+        hand_low=_DOOR_HAND_LOW, hand_high=_DOOR_HAND_HIGH, hand_reset=DOOR_HAND_RESET,
+        hand_goal_low=_DOOR_HAND_LOW, hand_goal_high=_DOOR_HAND_HIGH,
         object_goal_low=(0.0,), object_goal_high=(0.83,),
         object_reset_low=(0.0,), object_reset_high=(0.0,),
-        reset_free=True,
+        reset_free=True, n_substeps=15,  # 0.15 s per env step: 0.003 s x frame_skip 50
+        source="multiworld/envs/mujoco/__init__.py SawyerDoorHookResetFreeEnv-v1; "
+               "sawyer_xyz/sawyer_door_hook.py (reset-free: the mocap starts at the origin); "
+               "assets/sawyer_xyz/door_hook_config.xml timestep; sawyer_door_pull_hook.xml",
+        revision=2,  # 2: the reference's physics, hand reset and goal-image pretraining data
     ),
     # Pickup: the appendix gives a 10 cm (y) x 13 cm (z) state/goal box for hand and object;
     # multiworld's z range [0.05, 0.13] is 8 cm and excludes the hand reset z = 0.2, so the

@@ -141,13 +141,32 @@ def test_goal_distance_is_the_object_distance_of_the_object_states():
                                                     jnp.array([0.2])), [0.3, 0.1], rtol=1e-6)
 
 
+# door_pull's phases: approach and lowering end at step 23, the pull at step 31.
+DOOR_LOWERED, DOOR_RELEASED = 23, 31
+
+
 def test_pulling_the_hook_opens_the_door():
     s0 = reset_fn("door_open")(jax.random.PRNGKey(0))
     _, traj = run("door_open", s0, SCRIPTS["door_open"](T))
     angle = np.asarray(traj.obj[:, 0])
-    assert angle[5] < 0.02  # lowering the hook alone does not move the door
+    assert np.abs(angle[:DOOR_LOWERED]).max() < 0.005  # approaching and lowering: no push
     assert angle[-1] > 0.8  # pulling along the arc opens it past the largest goal angle
-    assert angle[-1] <= scenes.DOOR_MAX_ANGLE + 0.02  # hinge limit holds
+    assert angle.max() <= scenes.DOOR_MAX_ANGLE + 0.02  # hinge limit holds
+
+
+def test_a_released_door_coasts_with_the_reference_damping_and_inertia():
+    # The reference's door: hinge damping 0.1, inertia 0.244 kg m^2, no friction loss, so a
+    # pushed door keeps going with time constant I / b = 2.44 s. Hand at its reset, far away.
+    env = env_of("door_open")
+    s = place_fn("door_open")(jnp.asarray(env.spec.hand_reset), jnp.array([0.2]))
+    w0, steps = 0.3, 10
+    dof = env.mj_model.joint("door_hinge").dofadr[0]
+    s = s.replace(data=s.data.replace(qvel=s.data.qvel.at[dof].set(w0)))
+    _, traj = run("door_open", s, np.zeros((T, 3), np.float32))
+    tau = scenes.DOOR_HINGE_INERTIA / scenes.DOOR_DAMPING
+    t = steps * env.spec.n_substeps * scenes.TIMESTEP
+    expected = 0.2 + w0 * tau * (1 - np.exp(-t / tau))  # 0.35 rad on
+    assert float(traj.obj[steps - 1, 0]) == pytest.approx(expected, abs=0.02)
 
 
 def test_door_is_reset_free():
@@ -247,7 +266,15 @@ def test_mjx_matches_c_mujoco_on_scripted_actions(task):
     c_obj = np.asarray(c_obj)
     moved = np.abs(c_obj[-1] - np.asarray(env.object_state(s0))).max()
     assert moved > 0.02, "the script must move the object for the comparison to mean much"
-    np.testing.assert_allclose(np.asarray(traj.obj), c_obj, atol=0.005)
+    if task != "door_open":
+        np.testing.assert_allclose(np.asarray(traj.obj), c_obj, atol=0.005)
+        return
+    # The door: 3 mm at the handle while the hook pulls it; once released, the heavy door
+    # rattles in the 16 mm between bar and panel, where MJX's and C MuJoCo's box-box contacts
+    # part by up to 0.05 rad, and both come to rest within 0.03 rad (docs/scenes.md).
+    pulled = slice(0, DOOR_RELEASED)
+    np.testing.assert_allclose(np.asarray(traj.obj[pulled]), c_obj[pulled], atol=0.015)
+    np.testing.assert_allclose(np.asarray(traj.obj[-1]), c_obj[-1], atol=0.03)
 
 
 def _import_in_subprocess(code, pythonpath=None):
@@ -327,6 +354,30 @@ def test_push_tasks_use_the_reference_hand_box_and_reset(task):
                                                      clipped - np.asarray(spec.object_reset_high))))
         assert at_clip < tasks_mod.PUSH_CONTACT  # moved only because the target overlaps
         assert abs(reset[0] - clipped[0]) <= 0.04
+
+
+def test_door_uses_the_reference_physics_and_reset():
+    # SawyerDoorHookResetFreeEnv-v1: door_hook_config.xml timestep 0.003 x frame_skip 50;
+    # sawyer_door_pull_hook.xml: doorjoint damping 0.1, armature 0, no frictionloss, and a
+    # panel, frame and handle at default density: 0.2437 kg m^2 about the hinge (computed
+    # with MuJoCo from that XML); reset-free from construction: the mocap starts at the
+    # origin, clipped into the hand box (-0.1, 0.45, 0.1)..(0.05, 0.65, 0.25).
+    import mujoco
+
+    spec = envs_mjx.TASKS["door_open"]
+    assert spec.n_substeps * scenes.TIMESTEP == pytest.approx(0.003 * 50)
+    assert "SawyerDoorHookResetFreeEnv-v1" in spec.source
+    assert spec.hand_low == (-0.1, 0.45, 0.1) and spec.hand_high == (0.05, 0.65, 0.25)
+    assert spec.hand_reset == tuple(np.clip(0.0, spec.hand_low, spec.hand_high))
+    m = env_of("door_open").mj_model
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    full = np.zeros((m.nv, m.nv))
+    mujoco.mj_fullM(m, d, full)
+    dof = m.joint("door_hinge").dofadr[0]
+    assert full[dof, dof] == pytest.approx(0.2437, abs=0.001)
+    assert m.dof_damping[dof] == 0.1 and m.dof_frictionloss[dof] == 0.0
+    assert m.dof_armature[dof] == 0.0
 
 
 def _wall_gaps(task, pts):

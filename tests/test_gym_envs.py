@@ -42,6 +42,9 @@ def test_check_env_pixels(gym_id):
     assert reward == pytest.approx(float(want), abs=1e-6)
     assert reward == pytest.approx(-info["goal_distance"], abs=1e-6)
     assert not terminated and not truncated
+    # videos play in real time: one frame per env step (0.1 s; the door's 0.15 s)
+    assert env.metadata["render_fps"] == pytest.approx(
+        1 / 0.15 if gym_id == "roll/DoorOpen-v0" else 10.0)
     env.close()
 
 

@@ -105,6 +105,25 @@ def test_cpu_preset_trains_only_skewfits_scene_vae_online():
     assert make_config("puck_push", "roll", "cpu", vae_schedule="smoke").vae_schedule == "smoke"
 
 
+# The reference code's pretraining data (ROLL/launch_files/launch_ROLL_*.py and their dataset
+# generators): scene-VAE images, and the object-VAE / LSTM images' goal share and hand.
+REFERENCE_PRETRAIN = {
+    "puck_push": ("goals", 1.0, "random"),  # set-to-goal images
+    "hurdle_bottom": ("region", 0.0, "away"),  # _generate_sawyerhurdlemiddle_dataset
+    "hurdle_top": ("region", 0.0, "away"),  # _generate_sawyerhurdle_dataset
+    "door_open": ("goals", 1.0, "random"),  # door_original_dataset.npy
+    "pickup": ("goals", 1.0, "random"),  # pickup-original-dataset.npy
+}
+
+
+def test_every_task_pretrains_on_the_reference_data():
+    for task, want in REFERENCE_PRETRAIN.items():
+        cfg = make_config(task, "roll", "cpu")
+        got = (cfg.scene_pretrain_data, cfg.object_vae.pretrain_goal_share,
+               cfg.object_vae.pretrain_hand)
+        assert got == want, task
+
+
 def test_pretrain_overrides_reach_the_analysis_config(tmp_path):
     from roll_jax.analysis import checkpoints
     from roll_jax.encoders import pretrain

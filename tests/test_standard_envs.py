@@ -39,7 +39,8 @@ def test_registry_names_and_instances():
     assert registry.load("PuckPush", obs_type="state") is not a
     assert registry.load("PuckPush", config={"obs_type": "state"}) is registry.load(
         "PuckPush", config_overrides={"obs_type": "state"})
-    assert registry.get_default_config("DoorOpen") == standard.Config()
+    assert registry.get_default_config("DoorOpen") == standard.Config(ctrl_dt=0.15)
+    assert registry.load("DoorOpen").dt == pytest.approx(0.15)  # the reference's 3 ms x 50
 
 
 @pytest.mark.parametrize("kwargs, pattern", [
@@ -48,7 +49,8 @@ def test_registry_names_and_instances():
     ({"obs_typ": "state"}, r"'obs_typ'.*valid fields: obs_type, goal_in_obs"),
     ({"image_size": 0}, r"image_size must be a positive int, got 0"),
     ({"episode_length": -1}, r"episode_length must be a positive int or None, got -1"),
-    ({"ctrl_dt": 0.05}, r"ctrl_dt is fixed by the scene \(0.1\), got 0.05"),
+    ({"ctrl_dt": 0.05}, r"ctrl_dt is fixed by the scene of 'puck_push' \(0.1\), got 0.05"),
+    ({"sim_dt": 0.002}, r"sim_dt is fixed by the scene \(0.01\), got 0.002"),
 ])
 def test_bad_config_names_the_value_and_the_choices(kwargs, pattern):
     kwargs = {"name": "PuckPush", **kwargs}
