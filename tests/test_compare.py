@@ -129,6 +129,9 @@ def test_figure4_pairs_each_cell_with_roll_up_to_their_common_evaluations(tmp_pa
     assert pair["paired_diff_mean"] == pytest.approx(np.mean([0, 0, 0, -0.03, -0.03, -0.03]))
     assert pair["evaluations_a_below_b"] == 1
     assert res["door_open"]["paired_with_roll"] == {}
+    printed = capsys.readouterr().out  # the door in rad, the pushes in cm
+    assert "median 0.200 rad (0.150 rad - 0.250 rad)" in printed
+    assert "median 3.00 cm" in printed
     # a run directory is checked against the cell it is given as
     with pytest.raises(SystemExit):
         figure4.main(["--cell", "hurdle_top", "roll", runs[0], "--png", str(png)])

@@ -21,16 +21,10 @@ import json
 import os
 
 from roll_jax.analysis.compare import compare, write_json
+from roll_jax.analysis.stats import format_distance
 from roll_jax.training import reproduce, run_dir
 
 REFERENCE = "roll"
-# How the printed summary shows a task's final distance (the metrics are in m, the door's in rad).
-UNITS = {"door_open": ("rad", 1.0)}
-
-
-def _fmt(task: str, x: float, sign: str = "") -> str:
-    unit, scale = UNITS.get(task, ("cm", 100.0))
-    return f"{x * scale:{sign}.3f} {unit}" if unit == "rad" else f"{x * scale:{sign}.2f} {unit}"
 
 
 def read_cell(task: str, variant: str, path: str) -> tuple[list[dict], int | None]:
@@ -117,12 +111,15 @@ def main(argv=None) -> int:
     reproduce.figure4(curves, a.png)
     print(f"wrote {a.png}")
     for task, entry in summary.items():
+        def fmt(x, sign="", task=task):
+            return format_distance(task, x, sign)
+
         for variant, s in entry["cells"].items():
             print(f"{task:14s} {variant:22s} {s['env_steps']:6d} steps: median "
-                  f"{_fmt(task, s['median'])} ({_fmt(task, s['q25'])} - {_fmt(task, s['q75'])})")
+                  f"{fmt(s['median'])} ({fmt(s['q25'])} - {fmt(s['q75'])})")
         for variant, pair in entry["paired_with_roll"].items():
-            print(f"{task:14s} ROLL - {variant}: {_fmt(task, pair['paired_diff_mean'], '+')} +- "
-                  f"{_fmt(task, pair['paired_diff_sem'])} paired to {pair['to_steps']}, "
+            print(f"{task:14s} ROLL - {variant}: {fmt(pair['paired_diff_mean'], '+')} +- "
+                  f"{fmt(pair['paired_diff_sem'])} paired to {pair['to_steps']}, "
                   f"ROLL below in {pair['evaluations_a_below_b']}/{pair['n_evaluations']}")
     if a.out:
         write_json(a.out, {"cells": {f"{t} {v}": path for t, v, path in a.cell},

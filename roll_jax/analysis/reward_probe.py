@@ -22,7 +22,7 @@ import os
 
 import numpy as np
 
-from roll_jax.analysis.stats import spearman
+from roll_jax.analysis.stats import distance_unit, spearman
 
 # JAX and the encoders are imported where they are used: `--help` answers without them.
 
@@ -133,9 +133,8 @@ def main(argv=None) -> dict:
     except (FileNotFoundError, ValueError) as e:
         p.error(str(e))
     os.makedirs(a.out, exist_ok=True)
-    door = task == "door_open"
-    plot(results, pairs, os.path.join(a.out, "reward_probe.png"), 1.0 if door else 100.0,
-         "rad" if door else "cm")
+    unit, scale = distance_unit(task)
+    plot(results, pairs, os.path.join(a.out, "reward_probe.png"), scale, unit)
     summary = {"task": task, "n": a.n, "seed": a.seed,
                "runs": [{k: v for k, v in r.items() if k != "latent_distance"} for r in results]}
     with open(os.path.join(a.out, "reward_probe.json"), "w") as f:

@@ -6,6 +6,19 @@ from __future__ import annotations
 import numpy as np
 
 
+def distance_unit(task: str) -> tuple[str, float]:
+    """(unit, scale) in which results show `task`'s distances: the metrics are in m, shown in
+    cm; the door's are angles in rad, shown as they are."""
+    return ("rad", 1.0) if task == "door_open" else ("cm", 100.0)
+
+
+def format_distance(task: str, x: float, sign: str = "") -> str:
+    """`x` (m, or rad on the door) in `task`'s unit: "4.31 cm", "0.104 rad"; `sign` "+" signs it."""
+    unit, scale = distance_unit(task)
+    digits = 3 if unit == "rad" else 2
+    return f"{x * scale:{sign}.{digits}f} {unit}"
+
+
 def rankdata(x) -> np.ndarray:
     """Ranks 1..n of a 1-D array, ties get the average of the ranks they span (like
     scipy.stats.rankdata(method="average"))."""
