@@ -13,10 +13,10 @@ $(STAMP): pyproject.toml
 	$(VENV)/bin/pip install -q --no-compile -e ".[test]"
 	touch $(STAMP)
 
-# ROLL from pixels on puck_push at the cpu preset, cut to 30k env steps and 2 seeds: the whole
-# job (segmentation, pretraining, training) took 15 min on 2 idle cores.
+# ROLL from pixels on puck_push at the cpu preset (50k env steps), one seed: segmentation,
+# pretraining and training in one job (docs/training.md has its time and curve).
 train: $(STAMP)
-	$(VENV)/bin/python train.py --task puck_push --algo roll --preset cpu --seeds 2 --set total_env_steps=30000 --out runs/puck_push_roll_cpu
+	$(VENV)/bin/python train.py --task puck_push --algo roll --preset cpu --seeds 1 --out runs/puck_push_roll_cpu
 
 # Two workers, whole files per worker (module fixtures are built once): XLA compiles on one
 # core, so two files compile side by side on a 2-core machine. Files go out in the order
