@@ -32,17 +32,29 @@ def hurdle_top_forward(n_steps: int = 30) -> np.ndarray:
     return _seq(([0.0, 1.0], 9), ([-1.0, 0.0], 3), ([0.0, -1.0], 6), ([0.0, 0.0], n_steps - 18))
 
 
-# door_open: from the reset (0, 0.45, 0.1), up and left to (-0.05, 0.45, 0.226), then on to
-# (-0.05, 0.645, 0.226), above the gap behind the handle bar (the stem 5 mm clear of it).
-DOOR_APPROACH = (([-0.36, 0.0, 0.9], 7), ([0.0, 0.975, 0.0], 10))
+# door_open: above the gap behind the handle bar (the hook stem 5 mm clear of the bar).
+DOOR_ABOVE_GAP = (-0.05, 0.645, 0.226)
+DOOR_APPROACH_STEPS = (7, 10)  # rise (x, z), then move over the gap (y)
+
+
+def door_approach(hand_reset) -> tuple:
+    """The (action, steps) phases from `hand_reset` to `DOOR_ABOVE_GAP`: x and z first (clear
+    of the bar), then y; 17 steps from any reset in the hand box."""
+    from envs_mjx.env import ACTION_SCALE
+
+    rise, move = DOOR_APPROACH_STEPS
+    d = (np.asarray(DOOR_ABOVE_GAP) - np.asarray(hand_reset)) / ACTION_SCALE
+    return (([d[0] / rise, 0.0, d[2] / rise], rise), ([0.0, d[1] / move, 0.0], move))
 
 
 def door_pull(n_steps: int = 40) -> np.ndarray:
-    """door_open: rise above the handle bar and move over its gap (`DOOR_APPROACH`, 17 steps),
-    lower the hook behind the bar, pull it along the door's arc, then hold still (the hook
-    in the gap between bar and panel stops the coasting door)."""
-    return _seq(*DOOR_APPROACH, ([0.0, 0.0, -1.0], 6), ([0.3, -1.0, 0.0], 4),
-                ([0.8, -1.0, 0.0], 4), ([0.0, 0.0, 0.0], n_steps - 31))
+    """door_open: from the task's hand reset over the gap behind the handle bar
+    (`door_approach`, 17 steps), lower the hook behind the bar, pull it along the door's arc,
+    then hold still (the hook in the gap between bar and panel stops the coasting door)."""
+    from envs_mjx.tasks import TASKS
+
+    return _seq(*door_approach(TASKS["door_open"].hand_reset), ([0.0, 0.0, -1.0], 6),
+                ([0.3, -1.0, 0.0], 4), ([0.8, -1.0, 0.0], 4), ([0.0, 0.0, 0.0], n_steps - 31))
 
 
 def pickup_lift(n_steps: int = 30) -> np.ndarray:

@@ -149,8 +149,10 @@ def check_spec(s: TaskSpec) -> None:
 _PUSH_Z = HAND_Z_PUSH
 _HAND_AWAY = (-0.2, 0.2, HAND_Z_PUSH)  # the reference's object-only images: hand out of view
 _DOOR_HAND_LOW, _DOOR_HAND_HIGH = (-0.1, 0.45, 0.1), (0.05, 0.65, 0.25)
-# The origin clipped into the door's hand box (see door_open below).
-DOOR_HAND_RESET = tuple(min(max(0.0, lo), hi) for lo, hi in zip(_DOOR_HAND_LOW, _DOOR_HAND_HIGH))
+# The reference env's first hand target: the origin clipped into the hand box (see door_open).
+DOOR_REFERENCE_RESET = tuple(min(max(0.0, lo), hi)
+                             for lo, hi in zip(_DOOR_HAND_LOW, _DOOR_HAND_HIGH))
+DOOR_HAND_RESET = (-0.05, 0.635, 0.225)  # the appendix's: right above the handle's gap
 
 # The reference's corridor samplers (ROLL/generate_vae_dataset.py,
 # _generate_sawyerhurdle_dataset / _generate_sawyerhurdlemiddle_dataset): a third of the
@@ -211,8 +213,10 @@ TASKS: dict[str, TaskSpec] = {
     ),
     # door_open: the reference's env is reset-free from construction, so its reset never
     # runs and the mocap target starts at the origin, clipped into the hand box by the first
-    # step; the appendix's "hand initial (-0.05, 0.635, 0.225)" (right above the handle) is
-    # not what the registered env does.
+    # step (DOOR_REFERENCE_RESET), and its evaluation continues from where exploration left
+    # the hand. Ours starts every test episode from the reset, so we keep the appendix's hand
+    # initial (-0.05, 0.635, 0.225): from the clipped origin 15% of random episodes open the
+    # door >= 0.05 rad, from above the handle 73% (docs/scenes.md).
     "door_open": TaskSpec(
         name="door_open", kind="door", action_size=3, horizon=100, camera=DOOR_CAMERA,
         hand_low=_DOOR_HAND_LOW, hand_high=_DOOR_HAND_HIGH, hand_reset=DOOR_HAND_RESET,
