@@ -112,3 +112,20 @@ def test_pickup_grasp_phases_are_read_from_the_actions():
     actions[:5, 1] = -1.0  # down, then still, then up from step 9
     actions[9:, 1] = 1.0
     assert grasp_phases(actions) == (5, 9)
+
+
+def test_door_exploration_counts_the_episodes_that_open_the_door(tmp_path):
+    import json
+
+    from roll_jax.analysis import diagnose
+
+    out = tmp_path / "d.json"
+    diagnose.main(["--task", "door_open", "--n", "8", "--out", str(out)])
+    res = json.loads(out.read_text())["random_episodes"]
+    assert set(res) == {"task reset", "reference reset"}
+    for r in res.values():
+        assert r["n"] == 8 and 0.0 <= r["opened_0.2"] <= r["opened_0.05"] <= 1.0
+    # from right above the gap, lowering the hook and drifting -y opens the door in some
+    above = res["task reset"]
+    assert above["hand"] == [-0.05, 0.635, 0.225]
+    assert above["opened_0.05"] > 0 and above["mean_widest_rad"] > 0.01

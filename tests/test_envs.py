@@ -156,9 +156,9 @@ def test_pulling_the_hook_opens_the_door():
 
 def test_a_released_door_coasts_with_the_reference_damping_and_inertia():
     # The reference's door: hinge damping 0.1, inertia 0.244 kg m^2, no friction loss, so a
-    # pushed door keeps going with time constant I / b = 2.44 s. Hand at its reset, far away.
+    # pushed door keeps going with time constant I / b = 2.44 s. Hand far from the door.
     env = env_of("door_open")
-    s = place_fn("door_open")(jnp.asarray(env.spec.hand_reset), jnp.array([0.2]))
+    s = place_fn("door_open")(jnp.asarray(tasks_mod.DOOR_REFERENCE_RESET), jnp.array([0.2]))
     w0, steps = 0.3, 10
     dof = env.mj_model.joint("door_hinge").dofadr[0]
     s = s.replace(data=s.data.replace(qvel=s.data.qvel.at[dof].set(w0)))
@@ -269,11 +269,12 @@ def test_mjx_matches_c_mujoco_on_scripted_actions(task):
     if task != "door_open":
         np.testing.assert_allclose(np.asarray(traj.obj), c_obj, atol=0.005)
         return
-    # The door: 3 mm at the handle while the hook pulls it; once released, the heavy door
-    # rattles in the 16 mm between bar and panel, where MJX's and C MuJoCo's box-box contacts
-    # part by up to 0.05 rad, and both come to rest within 0.03 rad (docs/scenes.md).
+    # The door: the heavy door moves in jerks under the hook's box-box contacts, where MJX and
+    # C MuJoCo part by up to 0.04 rad (8 mm at the handle) while it is pulled; released, it
+    # rattles in the 16 mm between bar and hook foot and both come to rest together
+    # (docs/scenes.md).
     pulled = slice(0, DOOR_RELEASED)
-    np.testing.assert_allclose(np.asarray(traj.obj[pulled]), c_obj[pulled], atol=0.015)
+    np.testing.assert_allclose(np.asarray(traj.obj[pulled]), c_obj[pulled], atol=0.05)
     np.testing.assert_allclose(np.asarray(traj.obj[-1]), c_obj[-1], atol=0.03)
 
 
@@ -361,14 +362,16 @@ def test_door_uses_the_reference_physics_and_reset():
     # sawyer_door_pull_hook.xml: doorjoint damping 0.1, armature 0, no frictionloss, and a
     # panel, frame and handle at default density: 0.2437 kg m^2 about the hinge (computed
     # with MuJoCo from that XML); reset-free from construction: the mocap starts at the
-    # origin, clipped into the hand box (-0.1, 0.45, 0.1)..(0.05, 0.65, 0.25).
+    # origin, clipped into the hand box (-0.1, 0.45, 0.1)..(0.05, 0.65, 0.25). The hand reset
+    # is the appendix's instead (docs/scenes.md says why).
     import mujoco
 
     spec = envs_mjx.TASKS["door_open"]
     assert spec.n_substeps * scenes.TIMESTEP == pytest.approx(0.003 * 50)
     assert "SawyerDoorHookResetFreeEnv-v1" in spec.source
     assert spec.hand_low == (-0.1, 0.45, 0.1) and spec.hand_high == (0.05, 0.65, 0.25)
-    assert spec.hand_reset == tuple(np.clip(0.0, spec.hand_low, spec.hand_high))
+    assert tasks_mod.DOOR_REFERENCE_RESET == tuple(np.clip(0.0, spec.hand_low, spec.hand_high))
+    assert spec.hand_reset == (-0.05, 0.635, 0.225)
     m = env_of("door_open").mj_model
     d = mujoco.MjData(m)
     mujoco.mj_forward(m, d)

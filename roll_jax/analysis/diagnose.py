@@ -198,6 +198,32 @@ def random_pushes(env, key, n: int = 256) -> dict:
             "mean_gain_cm": float(gain.mean() * 100)}
 
 
+def door_exploration(env, key, hands: dict, n: int = 48) -> dict:
+    """(c) on door_open: per named hand start (door closed), how often a random policy's
+    `horizon`-step episode opens the door by >= 0.05 / 0.2 rad; needs no encoders."""
+    import jax
+    import jax.numpy as jnp
+
+    from envs_mjx.rollout import random_actions, rollout
+
+    @jax.jit
+    def run(keys, hand):
+        def one(k):
+            s0 = env.place(hand, jnp.zeros((1,)))
+            _, traj = rollout(env, s0, random_actions(k, env.horizon, env.action_size))
+            return traj.obj[:, 0]
+
+        return jax.vmap(one)(keys)
+
+    out = {}
+    for name, hand in hands.items():
+        widest = np.asarray(run(jax.random.split(key, n), jnp.asarray(hand, jnp.float32))).max(1)
+        out[name] = {"hand": list(hand), "n": n, "opened_0.05": float(np.mean(widest >= 0.05)),
+                     "opened_0.2": float(np.mean(widest >= 0.2)),
+                     "mean_widest_rad": float(widest.mean())}
+    return out
+
+
 def _centroids(images, threshold: float) -> tuple[np.ndarray, np.ndarray]:
     """Intensity-weighted centroid (row, col) and mass of the pixels above `threshold` of
     float images [n, H, W, 3] in [0, 1]."""
@@ -394,9 +420,11 @@ def main(argv=None):
     p.add_argument("--plot", nargs="+", metavar="LABEL=JSON", default=None,
                    help="instead of measuring: plot (a)'s profiles of written results into "
                         "--png, e.g. --plot before=a.json after=b.json")
-    p.add_argument("--task", choices=sorted(GOALS) + ["pickup"],
+    p.add_argument("--task", choices=sorted(GOALS) + ["pickup", "door_open"],
                    help="a push task, or pickup (roll_jax/analysis/diagnose_pickup.py); "
-                        "required to measure")
+                        "required to measure; door_open measures (c) only, from its reset "
+                        "and the reference's, and needs no --run")
+    p.add_argument("--n", type=int, default=48, help="door_open: random episodes per start")
     p.add_argument("--run", help="directory with segmentation/ and encoders/ (pretrain --out "
                                  "or a run); required to measure")
     p.add_argument("--out", default=None, help="JSON file to write (default: print only)")
@@ -423,9 +451,21 @@ def main(argv=None):
         else:
             plot_paths(results, a.png)
         return
-    if not (a.task and a.run):
+    if a.task == "door_open":
+        import jax
+
+        import envs_mjx
+        from envs_mjx.tasks import DOOR_REFERENCE_RESET
+
+        if a.n < 1:
+            p.error(f"--n must be positive, got {a.n}")
+        env = envs_mjx.make("door_open")
+        res = {"task": "door_open", "random_episodes": door_exploration(
+            env, jax.random.PRNGKey(a.seed),
+            {"task reset": env.spec.hand_reset, "reference reset": DOOR_REFERENCE_RESET}, a.n)}
+    elif not (a.task and a.run):
         p.error("--task and --run are required to measure")
-    if a.task == "pickup":
+    elif a.task == "pickup":
         from roll_jax.analysis.diagnose_pickup import diagnose_pickup
 
         res = diagnose_pickup(a.run, a.seed)
