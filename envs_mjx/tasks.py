@@ -227,7 +227,7 @@ TASKS: dict[str, TaskSpec] = {
         source="multiworld/envs/mujoco/__init__.py SawyerDoorHookResetFreeEnv-v1; "
                "sawyer_xyz/sawyer_door_hook.py (reset-free: the mocap starts at the origin); "
                "assets/sawyer_xyz/door_hook_config.xml timestep; sawyer_door_pull_hook.xml",
-        revision=2,  # 2: the reference's physics, hand reset and goal-image pretraining data
+        revision=2,  # 2: the reference's physics and goal-image pretraining data
     ),
     # Pickup: the appendix gives a 10 cm (y) x 13 cm (z) state/goal box for hand and object;
     # multiworld's z range [0.05, 0.13] is 8 cm and excludes the hand reset z = 0.2, so the
