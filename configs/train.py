@@ -36,7 +36,7 @@ VAE_SCHEDULES = ("custom_schedule", "custom_schedule_2", "smoke", "none")
 
 # The string-valued TrainConfig fields and what each may be.
 CHOICES = {"vae_schedule": VAE_SCHEDULES,
-           "scene_pretrain_data": ("random_policy", "goals", "region"),
+           "scene_pretrain_data": ("random_policy", "goals", "region", "placements"),
            "reward_norm": REWARD_NORMS, "prior_goals": ("standard", "buffer"),
            "achieved_encoding": ("sequence", "single", "held"),
            "sac_schedule": SAC_SCHEDULES}

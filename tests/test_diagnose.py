@@ -129,3 +129,22 @@ def test_door_exploration_counts_the_episodes_that_open_the_door(tmp_path):
     above = res["task reset"]
     assert above["hand"] == [-0.05, 0.635, 0.225]
     assert above["opened_0.05"] > 0 and above["mean_widest_rad"] > 0.01
+
+
+def test_state_r2_scores_each_state_on_the_axes_the_hand_box_spans():
+    import envs_mjx
+
+    rng = np.random.default_rng(0)
+    door, push = envs_mjx.make("door_open"), envs_mjx.make("puck_push")
+    hand = rng.uniform(door.spec.hand_low, door.spec.hand_high, (200, 3))
+    angle = rng.uniform(0.0, 1.0, (200, 1))
+    mix = rng.normal(size=(3, 8))
+    # latents that hold the hand (mixed into 8 dims) but not the door
+    res = diagnose._state_r2(door, hand @ mix, hand, angle)
+    assert res["hand_axes"] == "xyz" and res["hand_r2"] > 0.99
+    assert res["door_angle_r2"] < 0.1 and res["door_angle_std"] == [round(float(angle.std()), 4)]
+    both = diagnose._state_r2(door, np.concatenate([hand @ mix, angle], 1), hand, angle)
+    assert both["door_angle_r2"] > 0.99
+    puck = rng.uniform(-0.1, 0.1, (200, 2))
+    res = diagnose._state_r2(push, np.concatenate([hand[:, :2], puck], 1), hand, puck)
+    assert res["hand_axes"] == "xy" and res["hand_r2"] > 0.99 and res["puck_r2"] > 0.99

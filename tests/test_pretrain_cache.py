@@ -110,8 +110,25 @@ def test_scene_data_from_goals_are_rendered_goal_states():
     np.testing.assert_array_equal(data, want)
     assert data.shape == (4, 48, 48, 3) and data.dtype == jnp.uint8
     assert len({np.asarray(x).tobytes() for x in data}) == 4  # four different goal states
-    with pytest.raises(ValueError, match="'random_policy', 'goals' or 'region', got 'expert'"):
+    with pytest.raises(ValueError, match="'random_policy', 'goals', 'region' or 'placements', got 'expert'"):
         pretrain.scene_dataset(env, key, 4, "expert")
+
+
+def test_scene_data_from_placements_spread_the_hand_and_the_door():
+    import envs_mjx
+
+    env = envs_mjx.make("door_open")
+    key = jax.random.PRNGKey(4)
+    data = pretrain.scene_dataset(env, key, 6, "placements")
+    states = jax.vmap(lambda k: env.random_placement(*jax.random.split(k)))(
+        jax.random.split(key, 6))
+    np.testing.assert_array_equal(data, jax.vmap(env.render)(states))
+    hand, angle = np.asarray(jax.vmap(env.hand_pos)(states)), np.asarray(
+        jax.vmap(env.object_state)(states))[:, 0]
+    # the hand anywhere in its box (not at the handle, as in the goal images), the door at
+    # angles over its range
+    assert np.ptp(hand, 0).min() > 0.02 and np.ptp(angle) > 0.2
+    assert len({np.asarray(x).tobytes() for x in data}) == 6
 
 
 def test_object_data_holds_the_configured_share_of_goal_states():

@@ -3,6 +3,7 @@
     roll-analysis diagnose --task hurdle_bottom --run DIR [--out FILE.json] [--png PRIOR.png]
     roll-analysis diagnose --plot before=A.json after=B.json --png PATHS.png
     roll-analysis diagnose --task pickup --run DIR     (its own measurements: diagnose_pickup.py)
+    roll-analysis diagnose --task door_open [--run DIR] (c) from two hand starts; (b) with DIR
 
 DIR holds segmentation/ and encoders/ (a `roll_jax.encoders.pretrain --out` or a `train.py` run
 directory). Five measurements, each a question a failed learning run raises:
@@ -14,7 +15,8 @@ directory). Five measurements, each a question a failed learning run raises:
     distance to the goal: over the whole path, beyond and within 8 cm of the goal.
 (b) `scene`: does the policy's input say where hand and puck are? The affine R^2 of hand xy
     and puck xy from the scene-VAE's means, over states with the hand uniform in its box and
-    the puck where it can be (`env.random_placement`).
+    the puck where it can be (`env.random_placement`). On door_open: hand xyz and the door
+    angle, over such placements and over random-policy episodes from the reset.
 (c) `random_pushes`: can exploration find the way? The share of random-policy episodes from
     the task's reset whose puck moves >= 3 cm, and whose path distance to the goal falls by
     >= 3 cm.
@@ -151,24 +153,56 @@ def profile_spearman(profile: dict) -> dict:
 
 
 def scene_r2(env, encode_scene, key, n: int = 1000) -> dict:
-    """(b): affine R^2 of hand xy and puck xy from the scene latents (held-out, 5 folds)."""
+    """(b): affine R^2 of the hand's position (the axes its box spans: xy on the pushes, xyz on
+    the door) and of the object's state (puck xy; door angle) from the scene latents
+    (held-out, 5 folds), over states with the hand uniform in its box and the object where it
+    can be (`env.random_placement`)."""
     import jax
-
-    from roll_jax.analysis.stats import affine_cv_r2
 
     @jax.jit
     def draw(keys):
         def one(k):
             st = env.random_placement(*jax.random.split(k))
-            return env.render(st), env.hand_pos(st)[:2], env.object_state(st)
+            return env.render(st), env.hand_pos(st), env.object_state(st)
 
         return jax.vmap(one)(keys)
 
-    rgb, hand, puck = map(np.asarray, draw(jax.random.split(key, n)))
-    z = np.asarray(encode_scene(rgb), np.float64)
-    return {"n": n, "hand_r2": affine_cv_r2(z, hand.astype(np.float64), 5),
-            "puck_r2": affine_cv_r2(z, puck.astype(np.float64), 5),
-            "puck_std_cm": np.round(puck.std(0) * 100, 2).tolist()}
+    rgb, hand, obj = map(np.asarray, draw(jax.random.split(key, n)))
+    return {"n": n, **_state_r2(env, encode_scene(rgb), hand, obj)}
+
+
+def scene_r2_random_episodes(env, encode_scene, key, n_episodes: int = 16) -> dict:
+    """(b) over what exploration sees first: every frame of `n_episodes` random-policy
+    episodes from the task's reset."""
+    import jax
+
+    from envs_mjx.rollout import random_actions, rollout
+
+    @jax.jit
+    def run(keys):
+        def one(k):
+            k_r, k_a = jax.random.split(k)
+            _, traj = rollout(env, env.reset(k_r),
+                              random_actions(k_a, env.horizon, env.action_size), render=True)
+            return traj.rgb, traj.hand, traj.obj
+
+        return jax.vmap(one)(keys)
+
+    rgb, hand, obj = (np.asarray(x).reshape((-1,) + x.shape[2:])
+                      for x in run(jax.random.split(key, n_episodes)))
+    return {"n": len(rgb), "episodes": n_episodes, **_state_r2(env, encode_scene(rgb), hand, obj)}
+
+
+def _state_r2(env, latents, hand, obj) -> dict:
+    from roll_jax.analysis.stats import affine_cv_r2
+
+    z = np.asarray(latents, np.float64)
+    axes = np.flatnonzero(np.asarray(env.spec.hand_high) > np.asarray(env.spec.hand_low))
+    name = {"push": "puck", "door": "door_angle", "pickup": "cube"}[env.kind]
+    return {"hand_axes": "xyz"[axes[0]:axes[-1] + 1] if len(axes) else "",
+            "hand_r2": affine_cv_r2(z, np.asarray(hand, np.float64)[:, axes], 5),
+            f"{name}_r2": affine_cv_r2(z, np.asarray(obj, np.float64), 5),
+            f"{name}_std": np.round(np.asarray(obj).std(0), 4).tolist()}
 
 
 def random_pushes(env, key, n: int = 256) -> dict:
@@ -222,6 +256,23 @@ def door_exploration(env, key, hands: dict, n: int = 48) -> dict:
                      "opened_0.2": float(np.mean(widest >= 0.2)),
                      "mean_widest_rad": float(widest.mean())}
     return out
+
+
+def door_scene(run: str, key) -> dict:
+    """(b) on door_open: the scene latents of `run`'s encoders over random placements and over
+    random-policy episodes from the reset."""
+    import jax
+
+    import envs_mjx
+    from roll_jax.analysis.checkpoints import load_checkpoint, model_encoders
+
+    cfg, pre, seg = load_checkpoint(run, "door_open")
+    env = envs_mjx.make("door_open")
+    encode_scene, _ = model_encoders(cfg, pre, seg)
+    k_p, k_e = jax.random.split(key)
+    return {"scene_pretrain_data": cfg.scene_pretrain_data,
+            "scene": scene_r2(env, encode_scene, k_p),
+            "scene_random_episodes": scene_r2_random_episodes(env, encode_scene, k_e)}
 
 
 def _centroids(images, threshold: float) -> tuple[np.ndarray, np.ndarray]:
@@ -422,11 +473,11 @@ def main(argv=None):
                         "--png, e.g. --plot before=a.json after=b.json")
     p.add_argument("--task", choices=sorted(GOALS) + ["pickup", "door_open"],
                    help="a push task, or pickup (roll_jax/analysis/diagnose_pickup.py); "
-                        "required to measure; door_open measures (c) only, from its reset "
-                        "and the reference's, and needs no --run")
+                        "required to measure; door_open measures (c) from its reset "
+                        "and the reference's, and with --run (b)")
     p.add_argument("--n", type=int, default=48, help="door_open: random episodes per start")
     p.add_argument("--run", help="directory with segmentation/ and encoders/ (pretrain --out "
-                                 "or a run); required to measure")
+                                 "or a run); required to measure (door_open: optional)")
     p.add_argument("--out", default=None, help="JSON file to write (default: print only)")
     p.add_argument("--png", default=None, help="PNG of 32 decoded prior goals (push tasks); "
                                                "with --plot, the figure")
@@ -460,9 +511,12 @@ def main(argv=None):
         if a.n < 1:
             p.error(f"--n must be positive, got {a.n}")
         env = envs_mjx.make("door_open")
+        k_c, k_b = jax.random.split(jax.random.PRNGKey(a.seed))
         res = {"task": "door_open", "random_episodes": door_exploration(
-            env, jax.random.PRNGKey(a.seed),
+            env, k_c,
             {"task reset": env.spec.hand_reset, "reference reset": DOOR_REFERENCE_RESET}, a.n)}
+        if a.run:
+            res.update(run=a.run, **door_scene(a.run, k_b))
     elif not (a.task and a.run):
         p.error("--task and --run are required to measure")
     elif a.task == "pickup":

@@ -62,14 +62,17 @@ def scene_dataset(env, key, n_images: int, source: str = "random_policy") -> jax
     goal space (`env.sample_goal`: hand and object placed), rlkit's
     `oracle_dataset_using_set_to_goal` that the reference code's puck_push launch file uses;
     "region", hand and object each placed over where the object can be (`env.region_placement`:
-    the reference's hurdle corridor sampler) (TrainConfig.scene_pretrain_data)."""
+    the reference's hurdle corridor sampler); "placements", the hand uniform in its box and the
+    object where it can be (`env.random_placement`) (TrainConfig.scene_pretrain_data)."""
     if source == "goals":
         return _goal_images_fn(env)(jax.random.split(key, n_images))
     if source == "region":
         return _region_images_fn(env)(jax.random.split(key, n_images))
+    if source == "placements":
+        return _placement_images_fn(env)(jax.random.split(key, n_images))
     if source != "random_policy":
-        raise ValueError(f"scene data source must be 'random_policy', 'goals' or 'region', "
-                         f"got {source!r}")
+        raise ValueError(f"scene data source must be 'random_policy', 'goals', 'region' or "
+                         f"'placements', got {source!r}")
     n_eps = -(-n_images // env.horizon)
     rgb = _random_episodes_fn(env)(jax.random.split(key, n_eps))
     return rgb.reshape((-1,) + rgb.shape[2:])[:n_images]
@@ -85,6 +88,11 @@ def _goal_images_fn(env):
 @functools.lru_cache(maxsize=None)
 def _region_images_fn(env):
     return jax.jit(jax.vmap(lambda k: env.render(env.region_placement(*jax.random.split(k)))))
+
+
+@functools.lru_cache(maxsize=None)
+def _placement_images_fn(env):
+    return jax.jit(jax.vmap(lambda k: env.render(env.random_placement(*jax.random.split(k)))))
 
 
 @functools.lru_cache(maxsize=None)
