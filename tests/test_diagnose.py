@@ -142,6 +142,10 @@ def test_state_r2_scores_each_state_on_the_axes_the_hand_box_spans():
     # latents that hold the hand (mixed into 8 dims) but not the door
     res = diagnose._state_r2(door, hand @ mix, hand, angle)
     assert res["hand_axes"] == "xyz" and res["hand_r2"] > 0.99
+    assert len(res["hand_r2_per_axis"]) == 3 and min(res["hand_r2_per_axis"]) > 0.99
+    # latents that hold only the hand's x: x alone is located
+    x_only = diagnose._state_r2(door, hand[:, :1] @ mix[:1], hand, angle)["hand_r2_per_axis"]
+    assert x_only[0] > 0.99 and max(x_only[1:]) < 0.1
     assert res["door_angle_r2"] < 0.1 and res["door_angle_std"] == [round(float(angle.std()), 4)]
     both = diagnose._state_r2(door, np.concatenate([hand @ mix, angle], 1), hand, angle)
     assert both["door_angle_r2"] > 0.99

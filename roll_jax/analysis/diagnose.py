@@ -199,8 +199,10 @@ def _state_r2(env, latents, hand, obj) -> dict:
     z = np.asarray(latents, np.float64)
     axes = np.flatnonzero(np.asarray(env.spec.hand_high) > np.asarray(env.spec.hand_low))
     name = {"push": "puck", "door": "door_angle", "pickup": "cube"}[env.kind]
+    hand = np.asarray(hand, np.float64)
     return {"hand_axes": "xyz"[axes[0]:axes[-1] + 1] if len(axes) else "",
-            "hand_r2": affine_cv_r2(z, np.asarray(hand, np.float64)[:, axes], 5),
+            "hand_r2": affine_cv_r2(z, hand[:, axes], 5),
+            "hand_r2_per_axis": [affine_cv_r2(z, hand[:, i:i + 1], 5) for i in axes],
             f"{name}_r2": affine_cv_r2(z, np.asarray(obj, np.float64), 5),
             f"{name}_std": np.round(np.asarray(obj).std(0), 4).tolist()}
 
