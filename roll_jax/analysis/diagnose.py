@@ -513,7 +513,8 @@ def main(argv=None):
         if a.n < 1:
             p.error(f"--n must be positive, got {a.n}")
         env = envs_mjx.make("door_open")
-        k_c, k_b = jax.random.split(jax.random.PRNGKey(a.seed))
+        k_c = jax.random.PRNGKey(a.seed)
+        k_b = jax.random.fold_in(k_c, 1)
         res = {"task": "door_open", "random_episodes": door_exploration(
             env, k_c,
             {"task reset": env.spec.hand_reset, "reference reset": DOOR_REFERENCE_RESET}, a.n)}
