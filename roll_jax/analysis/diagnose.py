@@ -200,7 +200,7 @@ def _state_r2(env, latents, hand, obj) -> dict:
     axes = np.flatnonzero(np.asarray(env.spec.hand_high) > np.asarray(env.spec.hand_low))
     name = {"push": "puck", "door": "door_angle", "pickup": "cube"}[env.kind]
     hand = np.asarray(hand, np.float64)
-    return {"hand_axes": "xyz"[axes[0]:axes[-1] + 1] if len(axes) else "",
+    return {"hand_axes": "".join("xyz"[i] for i in axes),
             "hand_r2": affine_cv_r2(z, hand[:, axes], 5),
             "hand_r2_per_axis": [affine_cv_r2(z, hand[:, i:i + 1], 5) for i in axes],
             f"{name}_r2": affine_cv_r2(z, np.asarray(obj, np.float64), 5),

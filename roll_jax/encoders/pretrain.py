@@ -66,10 +66,9 @@ def scene_dataset(env, key, n_images: int, source: str = "random_policy") -> jax
     object where it can be (`env.random_placement`) (TrainConfig.scene_pretrain_data)."""
     if source == "goals":
         return _goal_images_fn(env)(jax.random.split(key, n_images))
-    if source == "region":
-        return _region_images_fn(env)(jax.random.split(key, n_images))
-    if source == "placements":
-        return _placement_images_fn(env)(jax.random.split(key, n_images))
+    if source in ("region", "placements"):
+        placement = "region_placement" if source == "region" else "random_placement"
+        return _placement_images_fn(env, placement)(jax.random.split(key, n_images))
     if source != "random_policy":
         raise ValueError(f"scene data source must be 'random_policy', 'goals', 'region' or "
                          f"'placements', got {source!r}")
@@ -86,13 +85,10 @@ def _goal_images_fn(env):
 
 
 @functools.lru_cache(maxsize=None)
-def _region_images_fn(env):
-    return jax.jit(jax.vmap(lambda k: env.render(env.region_placement(*jax.random.split(k)))))
-
-
-@functools.lru_cache(maxsize=None)
-def _placement_images_fn(env):
-    return jax.jit(jax.vmap(lambda k: env.render(env.random_placement(*jax.random.split(k)))))
+def _placement_images_fn(env, placement: str):
+    """Renders of `env.<placement>(k_hand, k_object)` (region_placement, random_placement)."""
+    place = getattr(env, placement)
+    return jax.jit(jax.vmap(lambda k: env.render(place(*jax.random.split(k)))))
 
 
 @functools.lru_cache(maxsize=None)
