@@ -43,13 +43,13 @@ def test_final_policy_difference_is_per_episode():
     assert out["median_a_minus_b_cm"] == pytest.approx(-1.0)
 
 
-def _finished_runs(tmp_path, shifts: dict) -> list[str]:
-    """Finished 2-seed run directories whose final distances are 0.1 - 0.01 i + shift at
-    evaluation i (500 env steps apart), one per name -> shift."""
+def _finished_runs(tmp_path, shifts: dict, task: str = "puck_push") -> list[str]:
+    """Finished 2-seed run directories of `task` whose final distances are 0.1 - 0.01 i + shift
+    at evaluation i (500 env steps apart), one per name -> shift."""
     from configs.train import build_config
     from roll_jax.training import run_dir
 
-    cfg = build_config("puck_push", "roll", "smoke", seeds=2)
+    cfg = build_config(task, "roll", "smoke", seeds=2)
     runs = []
     for name, shift in shifts.items():
         d = tmp_path / name
@@ -73,6 +73,18 @@ def test_compare_command_pairs_two_run_directories_and_plots_them(tmp_path, caps
     res = json.loads(out.read_text())
     assert res["evaluations_a_below_b"] == 3
     assert res["paired_diff_mean"] == pytest.approx(-0.02)
+
+
+def test_compare_prints_the_door_in_radians_and_refuses_its_final_policies_in_cm(tmp_path,
+                                                                                capsys):
+    runs = _finished_runs(tmp_path, {"a": -0.01, "b": 0.01}, task="door_open")
+    assert compare.main(runs) == 0
+    printed = capsys.readouterr().out
+    assert "A 0.090 rad  B 0.110 rad" in printed and "paired A-B -0.020 rad" in printed
+    assert "cm" not in printed
+    with pytest.raises(SystemExit):
+        compare.main([*runs, "--n-goals", "4"])
+    assert "door_open's distances are angles" in capsys.readouterr().err
 
 
 def test_compare_pairs_every_further_run_with_the_first(tmp_path, capsys):

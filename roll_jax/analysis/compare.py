@@ -27,12 +27,14 @@ with its final distance.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import sys
 
 import numpy as np
 
+from roll_jax.analysis.stats import format_distance
 from roll_jax.training import plots, run_dir
 
 
@@ -113,13 +115,15 @@ def write_json(path: str, obj) -> None:
     print(f"wrote {path}")
 
 
-def _print_pair(pair: dict, from_steps: int) -> None:
+def _print_pair(pair: dict, from_steps: int, task: str) -> None:
+    """One line per paired evaluation and a summary, in `task`'s unit (cm; rad on the door)."""
+    f = functools.partial(format_distance, task)
     for s, x, y in zip(pair["env_steps"], pair["median_a"], pair["median_b"]):
-        print(f"env steps {s:7d}: A {x * 100:5.2f} cm  B {y * 100:5.2f} cm")
-    print(f"from {from_steps}: mean of medians A {pair['mean_median_a'] * 100:.2f} cm, "
-          f"B {pair['mean_median_b'] * 100:.2f} cm; A below B in "
+        print(f"env steps {s:7d}: A {f(x)}  B {f(y)}")
+    print(f"from {from_steps}: mean of medians A {f(pair['mean_median_a'])}, "
+          f"B {f(pair['mean_median_b'])}; A below B in "
           f"{pair['evaluations_a_below_b']}/{pair['n_evaluations']}; paired A-B "
-          f"{pair['paired_diff_mean'] * 100:.2f} +- {pair['paired_diff_sem'] * 100:.2f} cm; "
+          f"{f(pair['paired_diff_mean'], '+')} +- {f(pair['paired_diff_sem'])}; "
           f"corr {pair['corr_per_seed_eval']}")
 
 
@@ -178,6 +182,9 @@ def main(argv=None) -> int:
         # two runs: the pair's figures at the top level; more: one entry per pair with A
         out = {"runs": a.runs, "task": ca.task, "seeds": ca.seeds, "complete": complete,
                **(pairs[0] if len(pairs) == 1 else {"pairs": pairs})}
+        if a.n_goals > 0 and ca.task == "door_open":
+            raise ValueError("--n-goals reports final policies in cm (within 3 cm, beyond 10 cm); "
+                             "door_open's distances are angles: compare its learning curves")
         if a.n_goals > 0:
             out["final_policies"] = final_policies(a.runs, a.n_goals, a.seed)
     except (FileNotFoundError, ValueError) as e:
@@ -185,7 +192,7 @@ def main(argv=None) -> int:
     for pair in pairs:
         if len(pairs) > 1:
             print(f"A = {pair['a']}, B = {pair['b']}")
-        _print_pair(pair, a.from_steps)
+        _print_pair(pair, a.from_steps, ca.task)
     if "final_policies" in out:
         d = out["final_policies"]["a_minus_b"]
         print(f"final policies on {a.n_goals} goals per seed: A - B "
