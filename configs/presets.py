@@ -101,8 +101,8 @@ CPU = Preset("cpu", "sized for a 2-core CPU: learns puck pushing within a sessio
         "sac_schedule": "step",  # updates between the steps: the oracle learns faster
     },
     "train_roll": {
-        # ROLL's scene-VAE trains in pretraining only: re-encoding the buffer after each
-        # online round costs more than the SAC updates (Skew-Fit keeps its schedule)
+        # ROLL's scene-VAE trains in pretraining only: online it costs 2-3x per chunk and
+        # changed nothing on the door (+0.004 +- 0.009 rad); Skew-Fit keeps its schedule
         "vae_schedule": "none",
         # so on the door it must see the hand off the handle, where no goal image shows it:
         # hand R^2 0.39 -> 0.69, ROLL at 50k 0.381 -> 0.227 rad (docs/results.md)
