@@ -178,6 +178,20 @@ def test_latent_vs_distance_monotone_object_latent(tmp_path):
     assert res["spearman_object"] == pytest.approx(1.0, abs=1e-12)
     assert abs(res["spearman_scene"]) < 0.5
     np.testing.assert_allclose(res["object_latent_distance"], radius[:n], rtol=1e-9, atol=1e-12)
+    near = dist <= res["near_goal_distance"]
+    assert near.sum() == pytest.approx(0.2 * n, abs=1)
+    assert res["near_goal_spearman_object"] == pytest.approx(1.0, abs=1e-12)
+    # An encoder that ranks the far observations but reverses the near ones: high overall,
+    # reversed near the goal.
+    r = radius[:n].copy()
+    idx = np.flatnonzero(near)
+    r[idx[np.argsort(dist[idx])]] = np.sort(r[idx])[::-1]
+    far_only = np.r_[r, 0.0][:, None] * dirs
+    res2 = fig5.latent_vs_distance(obs, goal, dist,
+                                   encode_scene=lambda x: scene_table[_read_index(x)],
+                                   encode_object=lambda x: far_only[_read_index(x)])
+    assert res2["spearman_object"] > 0.8
+    assert res2["near_goal_spearman_object"] == pytest.approx(-1.0, abs=1e-12)
 
     png, js = fig5.write_latent_vs_distance(res, str(tmp_path), "puck_push")
     assert os.path.getsize(png) > 1000
@@ -186,6 +200,7 @@ def test_latent_vs_distance_monotone_object_latent(tmp_path):
     with open(js) as f:
         out = json.load(f)
     assert {"spearman_object", "spearman_scene", "n", "task"} <= set(out)
+    assert out["near_goal_spearman_object"] == pytest.approx(1.0)
     assert out["task"] == "puck_push" and out["n"] == n
     assert out["spearman_object"] == pytest.approx(1.0)
     assert len(out["object_distance"]) == n
