@@ -104,6 +104,9 @@ def test_pixel_reference_ranks_visible_discs_and_counts_hidden_ones():
         goal_labels=_disc_labels(goal[None])[0], goal_state=goal)
     ref = fig5.pixel_reference(obs)
     assert ref["reference_spearman_object"] > 0.98
+    near = fig5.near_goal(obs.distances)
+    assert near.sum() == 40 and obs.distances[near].max() < obs.distances[~near].min()
+    assert ref["reference_near_goal_spearman_object"] > 0.9
     assert ref["reference_r2"] > 0.99 and ref["reference_pairwise_spearman"] > 0.98
     assert ref["share_object_hidden"] == 0.0 and ref["share_object_partly_hidden"] == 0.0
 
