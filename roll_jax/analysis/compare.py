@@ -172,6 +172,9 @@ def main(argv=None) -> int:
             if (c.task, c.seeds) != (ca.task, ca.seeds):
                 raise ValueError(f"task/seeds differ: {a.runs[0]} {ca.task}/{ca.seeds} vs "
                                  f"{d} {c.task}/{c.seeds}")
+        if a.n_goals > 0 and ca.task == "door_open":
+            raise ValueError("--n-goals reports final policies in cm (within 3 cm, beyond 10 cm); "
+                             "door_open's distances are angles: compare its learning curves")
         to_steps = a.to_steps
         if a.partial:
             last = min(max(r["env_steps"] for r in rows) for _, rows in runs)
@@ -182,9 +185,6 @@ def main(argv=None) -> int:
         # two runs: the pair's figures at the top level; more: one entry per pair with A
         out = {"runs": a.runs, "task": ca.task, "seeds": ca.seeds, "complete": complete,
                **(pairs[0] if len(pairs) == 1 else {"pairs": pairs})}
-        if a.n_goals > 0 and ca.task == "door_open":
-            raise ValueError("--n-goals reports final policies in cm (within 3 cm, beyond 10 cm); "
-                             "door_open's distances are angles: compare its learning curves")
         if a.n_goals > 0:
             out["final_policies"] = final_policies(a.runs, a.n_goals, a.seed)
     except (FileNotFoundError, ValueError) as e:
